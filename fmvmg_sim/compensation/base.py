@@ -1,0 +1,126 @@
+"""The compensator contract and the registry of methods by command-line name."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from ..errors import InputError
+from ..record import Record
+
+#: Compensator classes by their ``--method`` name.
+METHODS: dict[str, type["Compensator"]] = {}
+
+
+def register(name: str) -> Callable[[type], type]:
+    """Class decorator: make a compensator available as ``--method name``.
+
+    Parameters
+    ----------
+    name : str
+        The command-line name, e.g. ``"poly-baseline"``.
+
+    Returns
+    -------
+    callable
+        The decorator, which returns the class unchanged.
+    """
+    def deco(cls: type) -> type:
+        cls.method_name = name
+        METHODS[name] = cls
+        return cls
+    return deco
+
+
+def get_method(name: str) -> type["Compensator"]:
+    """The compensator class registered as ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A ``--method`` name.
+
+    Returns
+    -------
+    type
+        The compensator class.
+
+    Raises
+    ------
+    InputError
+        When no method has that name (the message lists the known ones).
+    """
+    _load_builtin_methods()
+    if name not in METHODS:
+        raise InputError(f"unknown method {name!r}; expected one of {sorted(METHODS)}", "--method")
+    return METHODS[name]
+
+
+def _load_builtin_methods() -> None:
+    """Import the modules that register the built-in methods (lazy: they pull heavy libraries)."""
+    import importlib
+    for mod in ("poly", "emd_rbf", "vmd_wflp_cssvr", "physics"):
+        try:
+            importlib.import_module(f"{__package__}.{mod}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__package__}.{mod}":
+                raise
+
+
+class Compensator(BaseEstimator):
+    """Base class of drift compensators (scikit-learn estimator contract on records).
+
+    Subclasses implement :meth:`fit` and :meth:`transform`; constructor arguments are
+    their hyper-parameters (so ``get_params``/``set_params``/``clone`` work).
+    """
+
+    method_name = "base"
+    #: Whether the method accepts records with uneven time steps (gaps).
+    handles_gaps = False
+
+    def fit(self, record: Record) -> "Compensator":
+        """Learn the drift model from a training record.
+
+        Parameters
+        ----------
+        record : Record
+            Training data with ``time_s``, ``temperature_C`` and ``rate_dps``.
+
+        Returns
+        -------
+        Compensator
+            ``self``.
+        """
+        raise NotImplementedError
+
+    def transform(self, record: Record) -> np.ndarray:
+        """The compensated rate output in deg/s, one value per record row.
+
+        Parameters
+        ----------
+        record : Record
+            The record to compensate.
+
+        Returns
+        -------
+        ndarray
+            Compensated ``rate_dps``.
+        """
+        raise NotImplementedError
+
+    def fit_transform(self, record: Record) -> np.ndarray:
+        """Fit on ``record`` and compensate the same record (in-sample).
+
+        Parameters
+        ----------
+        record : Record
+            Data to fit on and compensate.
+
+        Returns
+        -------
+        ndarray
+            Compensated ``rate_dps``.
+        """
+        return self.fit(record).transform(record)
