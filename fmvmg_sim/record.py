@@ -205,7 +205,7 @@ def read_record(path: str | os.PathLike, required: tuple[str, ...] = REQUIRED_CO
         nonmono = np.flatnonzero(dt <= 0)
         if nonmono.size:
             k = nonmono[0] + 1
-            raise InputError(f"time_s is not strictly increasing ({t[k - 1]!r} then {t[k]!r})",
+            raise InputError(f"time_s is not strictly increasing ({t[k - 1]:.12g} then {t[k]:.12g})",
                              f"{name} line {_data_lineno(lines, header_idx, k)}")
     return Record(cols, metadata, name)
 
@@ -262,3 +262,32 @@ def write_record(path: str | os.PathLike, record: Record) -> None:
         arr = np.column_stack([record.columns[c] for c in names])
         np.savetxt(buf, arr, delimiter=",", fmt="%.12g")
     atomic_write_text(path, buf.getvalue())
+
+
+def data_line_number(path: str | os.PathLike, row: int) -> int | None:
+    """1-based file line number of data row ``row`` of the record file at ``path``.
+
+    Data rows are counted as :func:`read_record` counts them: after the header,
+    skipping blank and ``#`` comment lines. Meant for error messages, so the file
+    is re-read only when a caller needs to name a line.
+
+    Parameters
+    ----------
+    path : path-like
+        The record file the row came from.
+    row : int
+        0-based index of the data row (the index into the record's arrays).
+
+    Returns
+    -------
+    int or None
+        The line number, or None when the file cannot be read or has no header.
+    """
+    try:
+        lines = Path(path).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    header_idx = next((i for i, s in enumerate(lines) if s.strip() and not s.strip().startswith("#")), None)
+    if header_idx is None:
+        return None
+    return _data_lineno(lines, header_idx, int(row))

@@ -1,0 +1,177 @@
+"""Numbers for the compiled step: the diagram at an operating point, discretised exactly."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from blocks import FullWaveRectifier
+
+from ..averaged import SteadyState, steady_state
+from ..diagram import CORE_INPUTS, CORE_OUTPUTS, Diagram
+from .discretize import expm_derivative, zoh
+from .layout import Layout
+from .step import N_CORE, PARAMS, STATE
+
+#: Floor of the carrier normaliser, as a fraction of the steady v_ps amplitude.
+NORMALISER_FLOOR = 0.1
+
+
+@dataclass
+class OperatingPlan:
+    """Discretised diagram at one operating point (temperature) for step ``h_s``.
+
+    Attributes
+    ----------
+    base : dict
+        Parameter fields (see :data:`fmvmg_sim.carrier.step.PARAMS`) at zero rate.
+    phi_rate : ndarray
+        Derivative of the core transition matrix per rad/s of input rate.
+    scale : ndarray
+        Core state scaling (physical = scale * internal).
+    steady : SteadyState
+        The averaged steady state used as the linearisation point.
+    """
+
+    base: dict
+    phi_rate: np.ndarray
+    scale: np.ndarray
+    steady: SteadyState
+    C_x: np.ndarray
+    C_y: np.ndarray
+    A_core: np.ndarray
+
+    def params(self, rate_rad_s: float = 0.0, phase_offset_rad: float = 0.0, trim_rad: float = 0.0) -> np.ndarray:
+        """Packed parameter vector for a chunk at ``rate_rad_s`` with a demodulation phase offset.
+
+        Parameters
+        ----------
+        rate_rad_s : float, optional
+        phase_offset_rad : float, optional
+            Extra demodulation-reference phase (flicker, drift effects).
+        trim_rad : float, optional
+            The designed phase trim.
+
+        Returns
+        -------
+        ndarray
+        """
+        v = dict(self.base)
+        v["Phi"] = self.base["Phi"] + rate_rad_s * self.phi_rate
+        v["cos_ref"] = np.cos(trim_rad + phase_offset_rad)
+        v["sin_ref"] = np.sin(trim_rad + phase_offset_rad)
+        return PARAMS.pack(v)
+
+
+def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.ndarray | None = None) -> OperatingPlan:
+    """Discretise ``dg`` for step ``h_s``.
+
+    Parameters
+    ----------
+    dg : Diagram
+    h_s : float
+        Step length.
+    noise_on : dict, optional
+        Switches ``brownian`` and ``electronic`` (default: both on).
+    scale : ndarray, optional
+        Core state scaling; keep it fixed across operating points of one run so the
+        state carries over unchanged (default: the diagram's own).
+
+    Returns
+    -------
+    OperatingPlan
+    """
+    noise_on = {"brownian": True, "electronic": True, **(noise_on or {})}
+    ss = steady_state(dg)
+    g0 = ss.modulator_gain
+    core0 = dg.core_system(g0)
+    core_g = dg.core_system(g0 + 1.0)
+    core_w = dg.core_system(g0, 1.0)
+    S = dg.core_state_scale() if scale is None else np.asarray(scale, dtype=float)
+    Sinv = 1.0 / S
+    A0 = Sinv[:, None] * np.asarray(core0.A) * S[None, :]
+    Ag = Sinv[:, None] * (np.asarray(core_g.A) - np.asarray(core0.A)) * S[None, :]
+    Aw = Sinv[:, None] * (np.asarray(core_w.A) - np.asarray(core0.A)) * S[None, :]
+    B = Sinv[:, None] * np.asarray(core0.B)
+    C = np.asarray(core0.C) * S[None, :]
+    D = np.asarray(core0.D)
+    if np.any(D[:3] != 0):
+        raise ValueError("the core's voltage outputs must not feed through inputs directly")
+    Phi, Gam = zoh(A0, B, h_s)
+    Phi_g = expm_derivative(A0, Ag, h_s)
+    Phi_w = expm_derivative(A0, Aw, h_s)
+    # noise standard deviations per step (one-sided PSD S -> variance S / (2 h))
+    psd_fx, psd_fy = dg.resonator.brownian_force_psd_N2_per_Hz()
+    nz = dg.noise
+    sig = np.array([
+        np.sqrt(psd_fx / (2 * h_s)) if noise_on["brownian"] else 0.0,
+        np.sqrt(psd_fy / (2 * h_s)) if noise_on["brownian"] else 0.0,
+        nz["drive_input_V_per_sqrtHz"] / np.sqrt(2 * h_s) if noise_on["electronic"] else 0.0,
+        nz["sense_input_V_per_sqrtHz"] / np.sqrt(2 * h_s) if noise_on["electronic"] else 0.0,
+    ])
+    idx = {name: k for k, name in enumerate(CORE_OUTPUTS)}
+    off = dg.core_output_offset()
+    Phi_amp, Gam_amp = zoh(np.asarray(dg.amplitude_lpf.linear_model().A), np.asarray(dg.amplitude_lpf.linear_model().B), h_s)
+    ol = dg.output_lpf.linear_model()
+    Phi_out, Gam_out = zoh(np.asarray(ol.A), np.asarray(ol.B), h_s)
+    base = dict(
+        Phi=Phi, Phi_g=Phi_g, g0=g0, Gam_fx=Gam[:, CORE_INPUTS.index("F_x_ext")], Gam_w=Gam * sig[None, :],
+        C_vx=C[idx["v_x"]], C_vps=C[idx["v_ps"]], C_vs=C[idx["v_s"]],
+        off_vx=off[idx["v_x"]], off_vps=off[idx["v_ps"]], off_vs=off[idx["v_s"]],
+        rect_k=FullWaveRectifier.carrier_constants(ss.omega_rad_s, h_s), rect_gain=dg.rectifier.gain,
+        rect_offset=dg.rectifier.offset_V, Phi_amp=Phi_amp, Gam_amp=Gam_amp[:, 0],
+        vref=dg.vref_V, kp=dg.pi.kp, ki=dg.pi.ki_per_s, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
+        k_mod=dg.modulator.k_per_V, vdac=dg.vdac_V, normalized=1.0 if dg.carrier_mode == "normalized" else 0.0,
+        n_floor_V=NORMALISER_FLOOR * ss.v_ps_amplitude_V, quad_coef=dg.comb_drive.quadratic_coef_N_per_V2,
+        vdc2=dg.comb_drive.vdc_V ** 2, cos_ref=1.0, sin_ref=0.0, k_demod=dg.demodulator.k_per_V,
+        Phi_out=Phi_out, Gam_out=Gam_out[:, 0], h=h_s,
+    )
+    return OperatingPlan(base=base, phi_rate=Phi_w, scale=S, steady=ss,
+                         C_x=C[idx["x"]], C_y=C[idx["y"]], A_core=A0)
+
+
+def initial_state(plan: OperatingPlan, drive_displacement_m: float = 10e-9, from_steady: bool = False) -> np.ndarray:
+    """Initial state: the loop at rest with a small drive displacement, or at its steady state.
+
+    Parameters
+    ----------
+    plan : OperatingPlan
+    drive_displacement_m : float, optional
+        Initial drive displacement (start-up from a perturbation).
+    from_steady : bool, optional
+        Start on the averaged steady state (zero-rate) instead; the fast states are
+        set from the steady drive motion and the slow ones from the steady outputs.
+
+    Returns
+    -------
+    ndarray
+    """
+    b = plan.base
+    ss = plan.steady
+    if from_steady:
+        # the core's oscillating eigenmode at the steady modulator gain, scaled to the steady amplitude
+        lam, vec = np.linalg.eig(plan.A_core)
+        k = int(np.argmin(np.abs(lam - 1j * ss.omega_rad_s)))
+        mode = vec[:, k] / (plan.C_x @ vec[:, k])
+        z = np.real(ss.amplitude_m * mode)
+    else:
+        z = np.zeros(N_CORE)
+        z[0] = drive_displacement_m / plan.scale[0]
+    vx = float(b["C_vx"] @ z + b["off_vx"])
+    vps = float(b["C_vps"] @ z + b["off_vps"])
+    vs = float(b["C_vs"] @ z + b["off_vs"])
+    amp = max(np.hypot(vx, vps), b["n_floor_V"])
+    n = b["vdac"] / amp if b["normalized"] else 1.0
+    x = dict(z=z, s_amp=[0.0, 0.0], integ=0.0, u=0.0, n=n, vx=vx, vps=vps, vs=vs, s_i=[0.0, 0.0], s_q=[0.0, 0.0],
+             fq=b["quad_coef"] * b["vdc2"], t=0.0, ncross=0.0, tlast=0.0)
+    if from_steady:
+        x["s_amp"] = [b["vref"], 0.0]
+        x["u"] = ss.agc_effort_V
+        x["integ"] = (ss.agc_effort_V) / b["ki"] if b["ki"] > 0 else 0.0
+        x["s_i"] = [ss.rate_V, 0.0]
+        x["s_q"] = [ss.quadrature_V, 0.0]
+    return STATE.pack(x)
+
+
+__all__ = ["OperatingPlan", "make_plan", "initial_state", "Layout"]

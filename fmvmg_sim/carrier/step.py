@@ -1,0 +1,119 @@
+"""The whole diagram as one step function, built from the blocks' faces.
+
+The linear core (resonator, pickoffs, amplifiers, phase shifter, modulator gain,
+comb drive) is advanced by its exact discretisation, scheduled in the slowly varying
+modulator gain ``g``: ``z+ = (Phi + (g - g0) Phi_g) z + Gamma w`` (first order in
+``g - g0``; :func:`fmvmg_sim.carrier.discretize.expm_derivative`). The nonlinear
+blocks use their carrier faces: the rectifier integrates ``|v|`` exactly over the
+step, the demodulators take the step mean of the product, the PI clamps with
+anti-windup, the comb drive's quadratic force is held over the next step.
+
+The same function serves numerically (numpy backend, for tests) and symbolically
+(CasADi backend, for the compiled engine).
+"""
+
+from __future__ import annotations
+
+from blocks import FullWaveRectifier, LowPass2, Multiplier, PIController
+from blocks.ops import numpy_ops
+
+from .layout import Layout, dot, matvec
+
+N_CORE = 8
+N_NOISE = 4  # F_x Brownian, F_y Brownian, drive-front-end voltage, sense-front-end voltage
+
+STATE = Layout([
+    ("z", (N_CORE,)), ("s_amp", (2,)), ("integ", ()), ("u", ()), ("n", ()),
+    ("vx", ()), ("vps", ()), ("vs", ()), ("s_i", (2,)), ("s_q", (2,)), ("fq", ()),
+    ("t", ()), ("ncross", ()), ("tlast", ()),
+])
+
+PARAMS = Layout([
+    ("Phi", (N_CORE, N_CORE)), ("Phi_g", (N_CORE, N_CORE)), ("g0", ()),
+    ("Gam_fx", (N_CORE,)), ("Gam_w", (N_CORE, N_NOISE)),
+    ("C_vx", (N_CORE,)), ("C_vps", (N_CORE,)), ("C_vs", (N_CORE,)), ("off_vx", ()), ("off_vps", ()), ("off_vs", ()),
+    ("rect_k", (4,)), ("rect_gain", ()), ("rect_offset", ()),
+    ("Phi_amp", (2, 2)), ("Gam_amp", (2,)),
+    ("vref", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
+    ("k_mod", ()), ("vdac", ()), ("normalized", ()), ("n_floor_V", ()),
+    ("quad_coef", ()), ("vdc2", ()),
+    ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
+    ("Phi_out", (2, 2)), ("Gam_out", (2,)),
+    ("h", ()),
+])
+
+
+def step(x, p, w, ops=numpy_ops):
+    """Advance the diagram by one step.
+
+    Parameters
+    ----------
+    x : sequence
+        State vector laid out as :data:`STATE`.
+    p : sequence
+        Parameters laid out as :data:`PARAMS`.
+    w : sequence
+        Standard-normal noise draws for this step (length :data:`N_NOISE`).
+    ops : object, optional
+        Math backend (numpy or CasADi).
+
+    Returns
+    -------
+    list
+        The next state.
+    """
+    S, P = STATE.unpack, PARAMS.unpack
+    z = S(x, "z")
+    h = P(p, "h")
+    n, u = S(x, "n"), S(x, "u")
+    vx0, vps0, vs0 = S(x, "vx"), S(x, "vps"), S(x, "vs")
+    # --- linear core, scheduled in the modulator gain g = K_mod u n ------------------
+    g = P(p, "k_mod") * u * n
+    Phi, Phi_g = P(p, "Phi"), P(p, "Phi_g")
+    Gw, Gfx = P(p, "Gam_w"), P(p, "Gam_fx")
+    dz = matvec(Phi_g, z)
+    lin = matvec(Phi, z)
+    wn = matvec(Gw, list(w))
+    fq = S(x, "fq")
+    dg = g - P(p, "g0")
+    z1 = [lin[i] + dg * dz[i] + wn[i] + Gfx[i] * fq for i in range(N_CORE)]
+    vx1 = dot(P(p, "C_vx"), z1) + P(p, "off_vx")
+    vps1 = dot(P(p, "C_vps"), z1) + P(p, "off_vps")
+    vs1 = dot(P(p, "C_vs"), z1) + P(p, "off_vs")
+    # --- amplitude loop: rectifier (3), low-pass (4), comparator (5), PI (7) -----------
+    rect = FullWaveRectifier(gain=P(p, "rect_gain"), offset_V=P(p, "rect_offset"))
+    rho = rect.carrier_mean(vps0, vps1, P(p, "rect_k"), ops)
+    s_amp = _lpf_step(P(p, "Phi_amp"), P(p, "Gam_amp"), S(x, "s_amp"), rho)
+    e = P(p, "vref") - s_amp[0]
+    pi = PIController(kp=P(p, "kp"), ki_per_s=P(p, "ki"), u_min_V=P(p, "u_min"), u_max_V=P(p, "u_max"))
+    integ1, u1 = pi.carrier_step(S(x, "integ"), e, h, ops)
+    # --- carrier normalisation (fixed-amplitude 'Vdac sin') or the pickoff as is -------
+    amp1 = ops.fmax(ops.sqrt(vx1 * vx1 + vps1 * vps1), P(p, "n_floor_V"))
+    norm = P(p, "normalized")
+    n1 = norm * P(p, "vdac") / amp1 + (1 - norm)
+    # --- demodulation (13) and output low-pass (14), in phase and in quadrature --------
+    c, s = P(p, "cos_ref"), P(p, "sin_ref")
+    demod = Multiplier(k_per_V=P(p, "k_demod"))
+    ri0, ri1 = n * (c * vps0 - s * vx0), n1 * (c * vps1 - s * vx1)
+    rq0, rq1 = n * (c * vx0 + s * vps0), n1 * (c * vx1 + s * vps1)
+    s_i = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_i"), demod.carrier_mean(vs0, vs1, ri0, ri1))
+    s_q = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_q"), demod.carrier_mean(vs0, vs1, rq0, rq1))
+    # --- quadratic comb force held over the next step -----------------------------------
+    vac1 = P(p, "k_mod") * u1 * n1 * vps1
+    fq1 = P(p, "quad_coef") * (P(p, "vdc2") + vac1 * vac1)
+    # --- frequency counter: rising zero crossings of v_x, interpolated -----------------
+    t0 = S(x, "t")
+    up = (vx0 < 0) * (vx1 >= 0)
+    tc = t0 + h * (-vx0) / ops.if_else(up, vx1 - vx0, 1.0)
+    ncross = S(x, "ncross") + up
+    tlast = ops.if_else(up, tc, S(x, "tlast"))
+    out = z1 + s_amp + [integ1, u1, n1, vx1, vps1, vs1] + s_i + s_q + [fq1, t0 + h, ncross, tlast]
+    return out
+
+
+def _lpf_step(Phi, Gam, s, uin):
+    return [Phi[0][0] * s[0] + Phi[0][1] * s[1] + Gam[0] * uin,
+            Phi[1][0] * s[0] + Phi[1][1] * s[1] + Gam[1] * uin]
+
+
+__all__ = ["STATE", "PARAMS", "N_CORE", "N_NOISE", "step", "LowPass2"]

@@ -1,0 +1,242 @@
+"""Devices as data: load a device file from ``scenarios/devices/`` and evaluate it at a temperature.
+
+A device file holds the MEMS element (``[mechanics]``, ``[thermal]``), its default
+electronics (``[circuit.*]``) and noise (``[noise]``); every number is
+``{ value = ..., source = "[S|D|E] ..." }``. :meth:`Device.at` applies the temperature
+laws and returns an :class:`OperatingPoint`, the parameter values of every block at
+that temperature, from which :mod:`fmvmg_sim.diagram` builds the blocks.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import thermal_laws as law
+from .schema import Choice, Num, Text, validate_tree
+from .tomlio import load_toml
+
+_AMP = {"gain": Num(), "gbw_Hz": Num(positive=True), "gbw_tc_per_K": Num(-0.05, 0.05),
+        "offset_V": Num(-10, 10), "gain_tc_per_K": Num(-0.01, 0.01)}
+
+DEVICE_SCHEMA = {
+    "name": Text(), "description": Text(),
+    "reference_temperature_C": Num(-273.15, 500),
+    "mechanics": {
+        "f_drive_Hz": Num(positive=True), "f_sense_Hz": Num(positive=True),
+        "m_drive_kg": Num(positive=True), "m_sense_kg": Num(positive=True),
+        "m_coriolis_kg": Num(positive=True),
+        "q_drive": Num(1.0, 1e9), "q_sense": Num(1.0, 1e9),
+        "quadrature_rate_dps": Num(-1e5, 1e5), "damping_coupling_rate_dps": Num(-1e4, 1e4),
+        "k_electrostatic_sense_N_per_m": Num(), "duffing_k3_drive_N_per_m3": Num(),
+    },
+    "thermal": {
+        "tcf_linear_per_K": Num(-1e-3, 1e-3), "tcf_quadratic_per_K2": Num(-1e-5, 1e-5),
+        "split_tcf_per_K": Num(-1e-4, 1e-4), "q_ted": Num(positive=True),
+        "q_anchor": Num(positive=True), "q_gas_exponent": Num(-10, 10),
+        "quadrature_tc_per_K": Num(-0.1, 0.1),
+    },
+    "circuit": {
+        "drive_pickoff": {"bias_V": Num(positive=True), "dC_dx_F_per_m": Num(positive=True),
+                          "c_feedback_F": Num(positive=True)},
+        "drive_amp": _AMP,
+        "phase_shifter": {"design_frequency_Hz": Num(positive=True), "trim_rad": Num(-1.5, 1.5),
+                          "rc_tc_per_K": Num(-0.01, 0.01)},
+        "rectifier": {"gain": Num(positive=True), "offset_tc_V_per_K": Num(-0.1, 0.1)},
+        "amplitude_lpf": {"f_c_Hz": Num(positive=True)},
+        "reference": {"vref_V": Num(positive=True), "vref_tc_per_K": Num(-0.01, 0.01)},
+        "pi": {"kp": Num(lo=0), "ki_per_s": Num(lo=0), "u_min_V": Num(), "u_max_V": Num()},
+        "modulator": {"carrier": Choice(("normalized", "pickoff")), "vdac_V": Num(positive=True),
+                      "k_per_V": Num(positive=True)},
+        "comb_drive": {"vdc_V": Num(positive=True), "dC_dx_F_per_m": Num(positive=True),
+                       "topology": Choice(("push-pull", "single-sided")), "asymmetry": Num(-1, 1)},
+        "sense_pickoff": {"bias_V": Num(positive=True), "dC_dx_F_per_m": Num(positive=True),
+                          "c_feedback_F": Num(positive=True), "c_feedthrough_F": Num(lo=0),
+                          "sign": Num(-1, 1)},
+        "sense_amp1": _AMP, "sense_amp2": _AMP,
+        "demodulator": {"k_per_V": Num(positive=True), "phase_trim": Num(-3.2, 3.2, allow=("auto",))},
+        "output_lpf": {"f_c_Hz": Num(positive=True), "gain": Num()},
+    },
+    "noise": {
+        "sense_input_V_per_sqrtHz": Num(lo=0), "drive_input_V_per_sqrtHz": Num(lo=0),
+        "flicker_phase_rad2": Num(lo=0), "flicker_output_dps2": Num(lo=0),
+        "rate_random_walk_dps_per_sqrt_s": Num(lo=0), "quantization_lsb_V": Num(lo=0),
+    },
+}
+
+DEVICES_DIR = Path(__file__).resolve().parent.parent / "scenarios" / "devices"
+
+
+@dataclass
+class OperatingPoint:
+    """Every block parameter of the device and circuit at one temperature.
+
+    Parameters
+    ----------
+    temperature_C : float
+        Die (and board) temperature.
+    values : dict
+        ``{"mechanics": {...}, "circuit": {...}, "noise": {...}}`` with the temperature
+        laws applied; see :meth:`Device.at`.
+    """
+
+    temperature_C: float
+    values: dict = field(default_factory=dict)
+
+    def __getitem__(self, key):
+        return self.values[key]
+
+
+@dataclass
+class Device:
+    """A validated device description.
+
+    Parameters
+    ----------
+    values : dict
+        Validated values by key path (``values["mechanics"]["q_drive"]``).
+    path : str
+        The file it came from.
+    """
+
+    values: dict
+    path: str = ""
+
+    @property
+    def name(self) -> str:
+        """Device name (e.g. ``fmvmg-a``)."""
+        return self.values.get("name", Path(self.path).stem)
+
+    @property
+    def reference_temperature_C(self) -> float:
+        """Temperature at which the nominal values hold."""
+        return float(self.values["reference_temperature_C"])
+
+    def with_overrides(self, overrides: dict, where: str) -> "Device":
+        """A copy with some values replaced (validated against the same schema).
+
+        Parameters
+        ----------
+        overrides : dict
+            Nested dict of plain values (a scenario's ``[device]`` table).
+        where : str
+            File name for messages.
+
+        Returns
+        -------
+        Device
+        """
+        checked = validate_tree(overrides, DEVICE_SCHEMA, where, prefix="device.")
+        merged = copy.deepcopy(self.values)
+        _merge(merged, checked)
+        return Device(merged, self.path)
+
+    def at(self, temperature_C: float) -> OperatingPoint:
+        """Apply the temperature laws: the block parameters at ``temperature_C``.
+
+        Parameters
+        ----------
+        temperature_C : float
+            Die/board temperature in degC.
+
+        Returns
+        -------
+        OperatingPoint
+        """
+        v = self.values
+        me, th, ci = v["mechanics"], v["thermal"], v["circuit"]
+        T0 = self.reference_temperature_C
+        dT = float(temperature_C) - T0
+        f_d = law.frequency_Hz(me["f_drive_Hz"], dT, th["tcf_linear_per_K"], th["tcf_quadratic_per_K2"])
+        f_s_mech = (law.frequency_Hz(me["f_sense_Hz"], dT, th["tcf_linear_per_K"], th["tcf_quadratic_per_K2"])
+                    + me["f_drive_Hz"] * th["split_tcf_per_K"] * dT)
+        k_s = me["m_sense_kg"] * (2 * np.pi * f_s_mech) ** 2 + me["k_electrostatic_sense_N_per_m"]
+        if k_s <= 0:
+            raise ValueError("electrostatic softening exceeds the sense stiffness")
+        f_s = np.sqrt(k_s / me["m_sense_kg"]) / (2 * np.pi)
+        q = {m: float(law.quality_factor(me[f"q_{m}"], temperature_C, T0, th["q_ted"], th["q_anchor"],
+                                         th["q_gas_exponent"])) for m in ("drive", "sense")}
+        omega_q = np.deg2rad(me["quadrature_rate_dps"]) * (1 + th["quadrature_tc_per_K"] * dT)
+        k_q = 2 * me["m_coriolis_kg"] * 2 * np.pi * f_d * omega_q
+        c_q = 2 * me["m_coriolis_kg"] * np.deg2rad(me["damping_coupling_rate_dps"]) * (me["q_sense"] / q["sense"])
+        mech = dict(m_drive_kg=me["m_drive_kg"], m_sense_kg=me["m_sense_kg"], m_coriolis_kg=me["m_coriolis_kg"],
+                    f_drive_Hz=float(f_d), f_sense_Hz=float(f_s), q_drive=q["drive"], q_sense=q["sense"],
+                    k_quad_N_per_m=float(k_q), c_quad_N_s_per_m=float(c_q),
+                    k3_drive_N_per_m3=me["duffing_k3_drive_N_per_m3"], temperature_K=temperature_C + law.KELVIN)
+
+        def amp(d):
+            return dict(gain=law.linear_tc(d["gain"], dT, d["gain_tc_per_K"]),
+                        gbw_Hz=law.linear_tc(d["gbw_Hz"], dT, d["gbw_tc_per_K"]), offset_V=d["offset_V"])
+
+        ps = ci["phase_shifter"]
+        circ = {
+            "drive_pickoff": dict(ci["drive_pickoff"]),
+            "drive_amp": amp(ci["drive_amp"]),
+            "phase_shifter": dict(design_frequency_Hz=ps["design_frequency_Hz"], trim_rad=ps["trim_rad"],
+                                  rc_tc_per_K=ps["rc_tc_per_K"], delta_T_K=dT),
+            "rectifier": dict(gain=ci["rectifier"]["gain"], offset_V=ci["rectifier"]["offset_tc_V_per_K"] * dT),
+            "amplitude_lpf": dict(ci["amplitude_lpf"]),
+            "reference": dict(vref_V=law.linear_tc(ci["reference"]["vref_V"], dT, ci["reference"]["vref_tc_per_K"])),
+            "pi": dict(ci["pi"]),
+            "modulator": dict(ci["modulator"]),
+            "comb_drive": dict(ci["comb_drive"]),
+            "sense_pickoff": dict(ci["sense_pickoff"]),
+            "sense_amp1": amp(ci["sense_amp1"]),
+            "sense_amp2": amp(ci["sense_amp2"]),
+            "demodulator": dict(ci["demodulator"]),
+            "output_lpf": dict(ci["output_lpf"]),
+        }
+        return OperatingPoint(float(temperature_C), {"mechanics": mech, "circuit": circ,
+                                                     "noise": dict(v["noise"]), "delta_T_K": dT})
+
+
+def _merge(dst: dict, src: dict) -> None:
+    for k, val in src.items():
+        if isinstance(val, dict) and isinstance(dst.get(k), dict):
+            _merge(dst[k], val)
+        else:
+            dst[k] = val
+
+
+def load_device(path: str | Path) -> Device:
+    """Load and validate a device file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A device TOML, or a bare name found in ``scenarios/devices/`` (``fmvmg_a``).
+
+    Returns
+    -------
+    Device
+
+    Raises
+    ------
+    InputError
+        Missing file, unknown key, bad value or a value without a source.
+    """
+    p = Path(path)
+    if not p.suffix and not p.exists():
+        p = DEVICES_DIR / f"{path}.toml"
+    tree = load_toml(p)
+    values = validate_tree(tree, DEVICE_SCHEMA, str(path), sourced=True)
+    missing = _missing(values, DEVICE_SCHEMA)
+    if missing:
+        from .errors import InputError
+        raise InputError(f"missing key(s) {missing}", str(path))
+    return Device(values, str(p))
+
+
+def _missing(values: dict, schema: dict, prefix: str = "") -> list[str]:
+    out = []
+    for k, spec in schema.items():
+        if k in ("name", "description", "*"):
+            continue
+        if k not in values:
+            out.append(prefix + k)
+        elif isinstance(spec, dict):
+            out += _missing(values[k], spec, prefix + k + ".")
+    return out

@@ -1,0 +1,174 @@
+"""Temperature and rate profiles: piecewise holds, ramps, steps and sines, evaluated at any time.
+
+A profile is given either as ``segments`` (holds, ramps, steps, sines, in order) or as
+``points`` (``[[t_s, value], ...]`` with strictly increasing times, linear in between).
+Both evaluate vectorised: ``profile(t_s)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+
+@dataclass
+class PiecewiseProfile:
+    """Breakpoints with linear interpolation, plus optional sine terms on intervals.
+
+    Parameters
+    ----------
+    times_s, values : ndarray
+        Breakpoints (times non-decreasing; equal times make a step).
+    sines : list of tuple
+        ``(t_start_s, t_end_s, amplitude, frequency_Hz, phase_rad)`` added on top.
+    """
+
+    times_s: np.ndarray
+    values: np.ndarray
+    sines: list
+
+    def __call__(self, t_s):
+        """Profile value at ``t_s`` (held constant after the last breakpoint).
+
+        Parameters
+        ----------
+        t_s : float or ndarray
+
+        Returns
+        -------
+        float or ndarray
+        """
+        t = np.asarray(t_s, dtype=float)
+        # right-continuous steps: use the last breakpoint at or before t
+        idx = np.searchsorted(self.times_s, t, side="right") - 1
+        idx = np.clip(idx, 0, len(self.times_s) - 1)
+        nxt = np.clip(idx + 1, 0, len(self.times_s) - 1)
+        t0, t1 = self.times_s[idx], self.times_s[nxt]
+        v0, v1 = self.values[idx], self.values[nxt]
+        span = np.where(t1 > t0, t1 - t0, 1.0)
+        frac = np.where(t1 > t0, np.clip((t - t0) / span, 0.0, 1.0), 0.0)
+        out = v0 + frac * (v1 - v0)
+        for (ta, tb, amp, f, ph) in self.sines:
+            on = (t >= ta) & (t < tb)
+            out = out + np.where(on, amp * np.sin(2 * np.pi * f * (t - ta) + ph), 0.0)
+        return out if out.ndim else float(out)
+
+    @property
+    def end_s(self) -> float:
+        """Time of the last breakpoint or sine end."""
+        ends = [self.times_s[-1]] + [s[1] for s in self.sines]
+        return float(max(ends))
+
+    def derivative(self, t_s):
+        """Slope of the piecewise-linear part (per second); sines excluded.
+
+        Parameters
+        ----------
+        t_s : float or ndarray
+
+        Returns
+        -------
+        float or ndarray
+        """
+        t = np.asarray(t_s, dtype=float)
+        idx = np.clip(np.searchsorted(self.times_s, t, side="right") - 1, 0, len(self.times_s) - 1)
+        nxt = np.clip(idx + 1, 0, len(self.times_s) - 1)
+        dt = self.times_s[nxt] - self.times_s[idx]
+        slope = np.where(dt > 0, (self.values[nxt] - self.values[idx]) / np.where(dt > 0, dt, 1.0), 0.0)
+        slope = np.where(t >= self.times_s[-1], 0.0, slope)
+        return slope if slope.ndim else float(slope)
+
+
+def _num(seg: dict, key: str, where: str, positive: bool = False) -> float:
+    v = seg[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise InputError(f"expected a number, got {v!r}", f"{where}.{key}")
+    v = float(v)
+    if not np.isfinite(v):
+        raise InputError("expected a finite number", f"{where}.{key}")
+    if positive and v <= 0:
+        raise InputError(f"must be > 0, got {v!r}", f"{where}.{key}")
+    return v
+
+
+def build_profile(table: dict, where: str, start_key: str, value_key: str, unit_word: str,
+                  allow_sines: bool) -> PiecewiseProfile:
+    """Build a profile from a scenario table (``[temperature]`` or ``[rate]``).
+
+    Parameters
+    ----------
+    table : dict
+        The table: ``start_<unit>`` and ``segments``, or ``points``.
+    where : str
+        Key path for messages (``scenario.toml: temperature``).
+    start_key : str
+        Name of the starting value (``start_C`` / ``start_dps``).
+    value_key : str
+        Unit suffix used in segment keys (``C`` or ``dps``).
+    unit_word : str
+        Human unit for messages.
+    allow_sines : bool
+        Whether sine segments are allowed.
+
+    Returns
+    -------
+    PiecewiseProfile
+
+    Raises
+    ------
+    InputError
+        Unknown segment keys, non-positive durations, or non-increasing points.
+    """
+    if "points" in table:
+        pts = table["points"]
+        if not isinstance(pts, list) or not pts or not all(isinstance(p, list) and len(p) == 2 for p in pts):
+            raise InputError("expected [[t_s, value], ...]", f"{where}.points")
+        arr = np.array(pts, dtype=float)
+        if arr[0, 0] != 0:
+            raise InputError("the first point must be at t = 0", f"{where}.points")
+        bad = np.flatnonzero(np.diff(arr[:, 0]) <= 0)
+        if bad.size:
+            raise InputError(f"times must be strictly increasing (point {bad[0] + 2} at "
+                             f"{arr[bad[0] + 1, 0]} s after {arr[bad[0], 0]} s)", f"{where}.points")
+        return PiecewiseProfile(arr[:, 0], arr[:, 1], [])
+    start = float(table.get(start_key, 0.0))
+    times, values, sines = [0.0], [start], []
+    t, v = 0.0, start
+    for i, seg in enumerate(table.get("segments", [])):
+        w = f"{where}.segments[{i}]"
+        if not isinstance(seg, dict):
+            raise InputError("each segment is a table like { hold_s = 60 }", w)
+        keys = set(seg)
+        if keys == {"hold_s"}:
+            t += _num(seg, "hold_s", w, positive=True)
+        elif keys == {f"ramp_to_{value_key}", f"rate_{value_key}_per_min"}:
+            target = _num(seg, f"ramp_to_{value_key}", w)
+            rate = abs(_num(seg, f"rate_{value_key}_per_min", w, positive=True))
+            if target == v:
+                raise InputError(f"ramp to the current value {v} {unit_word}", w)
+            t += abs(target - v) / rate * 60.0
+            v = target
+        elif keys == {f"ramp_to_{value_key}", "duration_s"}:
+            t += _num(seg, "duration_s", w, positive=True)
+            v = _num(seg, f"ramp_to_{value_key}", w)
+        elif keys == {f"step_to_{value_key}"}:
+            v = _num(seg, f"step_to_{value_key}", w)
+        elif allow_sines and {"sine_amplitude_dps", "sine_frequency_Hz", "duration_s"} <= keys <= {
+                "sine_amplitude_dps", "sine_frequency_Hz", "duration_s", "phase_deg"}:
+            dur = _num(seg, "duration_s", w, positive=True)
+            f = _num(seg, "sine_frequency_Hz", w, positive=True)
+            ph = np.deg2rad(float(seg.get("phase_deg", 0.0)))
+            sines.append((t, t + dur, _num(seg, "sine_amplitude_dps", w), f, ph))
+            t += dur
+        else:
+            forms = [f"{{ hold_s }}", f"{{ ramp_to_{value_key}, rate_{value_key}_per_min }}",
+                     f"{{ ramp_to_{value_key}, duration_s }}", f"{{ step_to_{value_key} }}"]
+            if allow_sines:
+                forms.append("{ sine_amplitude_dps, sine_frequency_Hz, duration_s [, phase_deg] }")
+            raise InputError(f"unknown segment keys {sorted(keys)}; expected one of: " + ", ".join(forms), w)
+        times.append(t)
+        values.append(v)
+    return PiecewiseProfile(np.array(times), np.array(values), sines)

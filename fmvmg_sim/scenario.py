@@ -1,0 +1,209 @@
+"""Scenarios as TOML, validated: what to simulate, for how long, under which temperature and rate.
+
+::
+
+    [scenario]
+    name = "startup"
+    device_file = "devices/fmvmg_a.toml"   # relative to this file, or a name in scenarios/devices/
+    duration_s = 0.3
+    output_rate_Hz = 2000.0
+    seed = 1
+    fidelity = "carrier"                  # carrier | envelope | auto (envelope above 60 s)
+    steps_per_cycle = 32                  # carrier engine
+
+    [initial]   drive_displacement_m = 10e-9, state = "rest" | "steady"
+    [temperature]  start_C + segments (hold_s, ramp_to_C + rate_C_per_min | duration_s, step_to_C) or points
+    [rate]         start_dps + segments (as above with _dps, plus sines) or points
+    [noise]        brownian, electronic, flicker, quantization, rate_random_walk = true/false
+    [circuit.*]    overrides of the device file's circuit (e.g. circuit.pi.kp = 100)
+    [device.*]     overrides of any device-file value (e.g. device.mechanics.q_drive = 1e5)
+    [effects]      unmodelled effects switched on (see fmvmg_sim.effects)
+
+``--set KEY=VALUE`` overrides any of these before validation.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .device import DEVICES_DIR, Device, load_device
+from .errors import InputError
+from .profiles import PiecewiseProfile, build_profile
+from .schema import Bool, Choice, Num, Text, validate_tree
+from .tomlio import load_toml, parse_override, set_path, suggest
+
+SCENARIO_SCHEMA = {
+    "scenario": {
+        "name": Text(), "description": Text(), "device_file": Text(),
+        "duration_s": Num(positive=True), "output_rate_Hz": Num(positive=True),
+        "seed": Num(lo=0, integer=True), "fidelity": Choice(("carrier", "envelope", "auto")),
+        "steps_per_cycle": Num(lo=8, hi=4096, integer=True),
+        "envelope_step_s": Num(positive=True, hi=0.1),
+    },
+    "initial": {"drive_displacement_m": Num(lo=0, hi=1e-4), "state": Choice(("rest", "steady"))},
+    "noise": {k: Bool() for k in ("brownian", "electronic", "flicker", "quantization", "rate_random_walk")},
+}
+TOP_KEYS = ("scenario", "initial", "temperature", "rate", "noise", "circuit", "device", "effects")
+
+DEFAULTS = {
+    "scenario": {"name": "unnamed", "description": "", "device_file": "fmvmg_a", "output_rate_Hz": 1000.0,
+                 "seed": 0, "fidelity": "auto", "steps_per_cycle": 32, "envelope_step_s": 1e-3},
+    "initial": {"drive_displacement_m": 10e-9, "state": "rest"},
+    "noise": {"brownian": True, "electronic": True, "flicker": True, "quantization": True,
+              "rate_random_walk": True},
+}
+
+#: Above this duration 'auto' fidelity picks the envelope engine.
+AUTO_ENVELOPE_ABOVE_S = 60.0
+
+
+@dataclass
+class Scenario:
+    """A validated scenario.
+
+    Attributes
+    ----------
+    path : str
+        Source file.
+    settings : dict
+        ``scenario``, ``initial`` and ``noise`` tables with defaults filled in.
+    device : Device
+        The device with the scenario's overrides applied.
+    temperature : PiecewiseProfile
+        Temperature (degC) against time.
+    rate : PiecewiseProfile
+        Applied rate (deg/s) against time.
+    effects : dict
+        The ``[effects]`` table (validated by :mod:`fmvmg_sim.effects`).
+    """
+
+    path: str
+    settings: dict
+    device: Device
+    temperature: PiecewiseProfile
+    rate: PiecewiseProfile
+    effects: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """Scenario name."""
+        return self.settings["scenario"]["name"]
+
+    @property
+    def duration_s(self) -> float:
+        """Simulated duration."""
+        return float(self.settings["scenario"]["duration_s"])
+
+    @property
+    def seed(self) -> int:
+        """Random seed."""
+        return int(self.settings["scenario"]["seed"])
+
+    @property
+    def noise(self) -> dict:
+        """Noise switches."""
+        return self.settings["noise"]
+
+    def fidelity(self) -> str:
+        """The engine to use: 'carrier' or 'envelope' ('auto' resolved by duration).
+
+        Returns
+        -------
+        str
+        """
+        f = self.settings["scenario"]["fidelity"]
+        if f == "auto":
+            return "envelope" if self.duration_s > AUTO_ENVELOPE_ABOVE_S else "carrier"
+        return f
+
+
+def load_scenario(path: str | Path, overrides: list[str] | None = None,
+                  seed: int | None = None, fidelity: str | None = None) -> Scenario:
+    """Load, override and validate a scenario file.
+
+    Parameters
+    ----------
+    path : str or Path
+    overrides : list of str, optional
+        ``KEY=VALUE`` strings (``--set``), applied before validation.
+    seed : int, optional
+        Overrides ``scenario.seed``.
+    fidelity : str, optional
+        Overrides ``scenario.fidelity``.
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    InputError
+        Any unknown key, wrong type or unit, bad value, missing device file, or a
+        profile whose times do not increase; the message names the key path.
+    """
+    name = str(path)
+    tree = load_toml(path)
+    for text in overrides or []:
+        key, value = parse_override(text)
+        top = key.split(".")[0]
+        if top not in TOP_KEYS:
+            raise InputError(f"unknown table {top!r}{suggest(top, TOP_KEYS)}; tables are {list(TOP_KEYS)}",
+                             f"--set {key}")
+        set_path(tree, key, value)
+    if seed is not None:
+        set_path(tree, "scenario.seed", seed)
+    if fidelity is not None:
+        set_path(tree, "scenario.fidelity", fidelity)
+    for top in tree:
+        if top not in TOP_KEYS:
+            raise InputError(f"unknown table{suggest(top, TOP_KEYS)}; tables are {list(TOP_KEYS)}", f"{name}: {top}")
+    plain = {k: tree.get(k, {}) for k in ("scenario", "initial", "noise")}
+    checked = validate_tree(plain, SCENARIO_SCHEMA, name)
+    settings = copy.deepcopy(DEFAULTS)
+    for k in settings:
+        settings[k].update(checked.get(k, {}))
+    if "duration_s" not in settings["scenario"]:
+        raise InputError("missing key (how long to simulate, in seconds)", f"{name}: scenario.duration_s")
+    device_file = settings["scenario"]["device_file"]
+    dpath = Path(device_file)
+    base = Path(path).resolve().parent
+    candidates = [base / dpath, DEVICES_DIR / dpath, DEVICES_DIR / f"{device_file}.toml"]
+    found = next((c for c in candidates if c.is_file()), None)
+    if found is None:
+        raise InputError(f"device file {device_file!r} not found (looked in {base} and {DEVICES_DIR})",
+                         f"{name}: scenario.device_file")
+    device = load_device(found)
+    dev_over = copy.deepcopy(tree.get("device", {}))
+    if "circuit" in tree:
+        dev_over.setdefault("circuit", {})
+        _deep_update(dev_over["circuit"], tree["circuit"])
+    if dev_over:
+        device = device.with_overrides(dev_over, name)
+    temp = build_profile(_table(tree, "temperature", name), f"{name}: temperature", "start_C", "C", "degC",
+                         allow_sines=False)
+    rate = build_profile(_table(tree, "rate", name), f"{name}: rate", "start_dps", "dps", "deg/s", allow_sines=True)
+    for prof, label in ((temp, "temperature"), (rate, "rate")):
+        extra = set(_table(tree, label, name)) - {"start_C", "start_dps", "segments", "points"}
+        if extra:
+            raise InputError(f"unknown key(s) {sorted(extra)}; expected start_{'C' if label == 'temperature' else 'dps'}, "
+                             "segments or points", f"{name}: {label}")
+    from .effects import validate_effects
+    effects = validate_effects(tree.get("effects", {}), f"{name}: effects")
+    return Scenario(name, settings, device, temp, rate, effects)
+
+
+def _table(tree: dict, key: str, name: str) -> dict:
+    t = tree.get(key, {})
+    if not isinstance(t, dict):
+        raise InputError("expected a table", f"{name}: {key}")
+    return t
+
+
+def _deep_update(dst: dict, src: dict) -> None:
+    for k, v in src.items():
+        if isinstance(v, dict) and isinstance(dst.get(k), dict):
+            _deep_update(dst[k], v)
+        else:
+            dst[k] = v
