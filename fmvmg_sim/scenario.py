@@ -14,6 +14,7 @@
     [initial]   drive_displacement_m = 10e-9, state = "rest" | "steady"
     [temperature]  start_C + segments (hold_s, ramp_to_C + rate_C_per_min | duration_s, step_to_C) or points
     [rate]         start_dps + segments (as above with _dps, plus sines) or points
+    [vref]         start_factor + segments (step_to_factor, ...): the AGC set-point as a multiple of Vref
     [noise]        brownian, electronic, flicker, quantization, rate_random_walk = true/false
     [circuit.*]    overrides of the device file's circuit (e.g. circuit.pi.kp = 100)
     [device.*]     overrides of any device-file value (e.g. device.mechanics.q_drive = 1e5)
@@ -45,7 +46,7 @@ SCENARIO_SCHEMA = {
     "initial": {"drive_displacement_m": Num(lo=0, hi=1e-4), "state": Choice(("rest", "steady"))},
     "noise": {k: Bool() for k in ("brownian", "electronic", "flicker", "quantization", "rate_random_walk")},
 }
-TOP_KEYS = ("scenario", "initial", "temperature", "rate", "noise", "circuit", "device", "effects")
+TOP_KEYS = ("scenario", "initial", "temperature", "rate", "vref", "noise", "circuit", "device", "effects")
 
 DEFAULTS = {
     "scenario": {"name": "unnamed", "description": "", "device_file": "fmvmg_a", "output_rate_Hz": 1000.0,
@@ -75,6 +76,8 @@ class Scenario:
         Temperature (degC) against time.
     rate : PiecewiseProfile
         Applied rate (deg/s) against time.
+    vref_factor : PiecewiseProfile
+        Multiplier of the amplitude set-point Vref against time (1 = nominal).
     effects : dict
         The ``[effects]`` table (validated by :mod:`fmvmg_sim.effects`).
     """
@@ -84,6 +87,7 @@ class Scenario:
     device: Device
     temperature: PiecewiseProfile
     rate: PiecewiseProfile
+    vref_factor: PiecewiseProfile
     effects: dict = field(default_factory=dict)
 
     @property
@@ -184,14 +188,16 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None,
     temp = build_profile(_table(tree, "temperature", name), f"{name}: temperature", "start_C", "C", "degC",
                          allow_sines=False)
     rate = build_profile(_table(tree, "rate", name), f"{name}: rate", "start_dps", "dps", "deg/s", allow_sines=True)
-    for prof, label in ((temp, "temperature"), (rate, "rate")):
-        extra = set(_table(tree, label, name)) - {"start_C", "start_dps", "segments", "points"}
+    vref_table = {"start_factor": 1.0, **_table(tree, "vref", name)}
+    vref = build_profile(vref_table, f"{name}: vref", "start_factor", "factor", "x Vref", allow_sines=False)
+    for label, start in (("temperature", "start_C"), ("rate", "start_dps"), ("vref", "start_factor")):
+        extra = set(_table(tree, label, name)) - {start, "segments", "points"}
         if extra:
-            raise InputError(f"unknown key(s) {sorted(extra)}; expected start_{'C' if label == 'temperature' else 'dps'}, "
-                             "segments or points", f"{name}: {label}")
+            raise InputError(f"unknown key(s) {sorted(extra)}; expected {start}, segments or points",
+                             f"{name}: {label}")
     from .effects import validate_effects
     effects = validate_effects(tree.get("effects", {}), f"{name}: effects")
-    return Scenario(name, settings, device, temp, rate, effects)
+    return Scenario(name, settings, device, temp, rate, vref, effects)
 
 
 def _table(tree: dict, key: str, name: str) -> dict:

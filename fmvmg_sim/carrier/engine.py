@@ -64,6 +64,7 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     temp = np.asarray(scn.temperature(t_mid), dtype=float)
     rate_dps = np.asarray(scn.rate(t_mid), dtype=float)
     rate_end = np.asarray(scn.rate(t_end), dtype=float)
+    vref_f = np.asarray(scn.vref_factor(t_mid), dtype=float)
     rng = np.random.default_rng(scn.seed)
     nz = scn.noise
     # slow noises at the output rate, drawn first so they do not depend on call sizes
@@ -98,7 +99,7 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     any_noise = nz["brownian"] or nz["electronic"]
     for k0 in range(0, n, per_call):
         k1 = min(n, k0 + per_call)
-        P = np.stack([plan_for(temp[k]).params(np.deg2rad(rate_dps[k]), phase_flicker[k], trim)
+        P = np.stack([plan_for(temp[k]).params(np.deg2rad(rate_dps[k]), phase_flicker[k], trim, vref_f[k])
                       for k in range(k0, k1)])
         W = rng.standard_normal(((k1 - k0) * M, N_NOISE)) if any_noise else np.zeros(((k1 - k0) * M, N_NOISE))
         Xc = roll(x, P, W)

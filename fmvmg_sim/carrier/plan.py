@@ -42,7 +42,8 @@ class OperatingPlan:
     C_y: np.ndarray
     A_core: np.ndarray
 
-    def params(self, rate_rad_s: float = 0.0, phase_offset_rad: float = 0.0, trim_rad: float = 0.0) -> np.ndarray:
+    def params(self, rate_rad_s: float = 0.0, phase_offset_rad: float = 0.0, trim_rad: float = 0.0,
+               vref_factor: float = 1.0) -> np.ndarray:
         """Packed parameter vector for a chunk at ``rate_rad_s`` with a demodulation phase offset.
 
         Parameters
@@ -52,6 +53,8 @@ class OperatingPlan:
             Extra demodulation-reference phase (flicker, drift effects).
         trim_rad : float, optional
             The designed phase trim.
+        vref_factor : float, optional
+            Multiplier of the amplitude set-point.
 
         Returns
         -------
@@ -61,6 +64,7 @@ class OperatingPlan:
         v["Phi"] = self.base["Phi"] + rate_rad_s * self.phi_rate
         v["cos_ref"] = np.cos(trim_rad + phase_offset_rad)
         v["sin_ref"] = np.sin(trim_rad + phase_offset_rad)
+        v["vref"] = self.base["vref"] * vref_factor
         return PARAMS.pack(v)
 
 

@@ -1,0 +1,86 @@
+"""``fmvmg run SCENARIO.toml``: simulate, write record.csv, summary.json and plots."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    """Add the ``run`` sub-command.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+    """
+    p = sub.add_parser("run", help="simulate a scenario", description=(
+        "Simulate a scenario; writes DIR/record.csv (CONTRACTS.md section 2), DIR/summary.json and PNG plots."))
+    p.add_argument("scenario", help="scenario TOML file")
+    p.add_argument("-o", "--out", default=None, help="output folder (default: out/<scenario name>)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (overrides scenario.seed)")
+    p.add_argument("--fidelity", choices=("carrier", "envelope", "auto"), default=None,
+                   help="engine: carrier (every drive cycle) or envelope (averaged); auto picks envelope above 60 s")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any scenario value, e.g. --set circuit.pi.kp=100 (repeatable)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    """Run the sub-command.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+
+    Returns
+    -------
+    int
+        Exit code.
+    """
+    from ..record import atomic_write_text, write_record
+    from ..runner import run_scenario, vref_profile_V
+    from ..scenario import load_scenario
+
+    scn = load_scenario(args.scenario, args.overrides, seed=args.seed, fidelity=args.fidelity)
+    out = Path(args.out) if args.out else Path("out") / scn.name
+    res, summary = run_scenario(scn, progress=False if args.no_progress else None)
+    out.mkdir(parents=True, exist_ok=True)
+    write_record(out / "record.csv", res.to_record())
+    atomic_write_text(out / "summary.json", json.dumps(_clean(summary), indent=2) + "\n")
+    if not args.no_plots:
+        from ..plots import plot_channels, plot_startup
+        plot_startup(res, vref_profile_V(scn, res.time_s, res["temperature_C"]), out / "startup.png")
+        plot_channels(res, out / "channels.png")
+        if res.info.get("engine") == "envelope" or scn.duration_s > 60:
+            from ..plots_long import plot_long_run
+            plot_long_run(res, out)
+    for m in summary["messages"]:
+        sys.stderr.write(f"fmvmg: {summary['status']}: {m}\n")
+    if args.json:
+        sys.stdout.write(json.dumps(_clean(summary)) + "\n")
+    else:
+        s = summary
+        sys.stderr.write(
+            f"fmvmg: {scn.name}: {s['status']}; drive {s['drive_amplitude_V']:.5g} V (set-point "
+            f"{s['drive_amplitude_setpoint_V']:.5g} V) at {s['drive_frequency_Hz']:.3f} Hz, AGC effort "
+            f"{s['agc_effort_V']:.4g} V, settled at {s['settling_time_s']:.3g} s; wrote {out}/record.csv "
+            f"({s['simulated_time_s']:.3g} s simulated in {s['wall_time_s']:.2f} s)\n")
+    return 0
+
+
+def _clean(obj):
+    """NaN/inf to None so the JSON is strict."""
+    import math
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if hasattr(obj, "item"):
+        return _clean(obj.item())
+    return obj
