@@ -31,7 +31,8 @@ def settling_time_s(t: np.ndarray, y: np.ndarray, target: np.ndarray | float, ba
     return float(t[last + 1]) if last + 1 < len(t) else float("nan")
 
 
-def summarize(res: SimResult, vref_V: np.ndarray, u_max_V: float, predicted: dict | None = None) -> dict:
+def summarize(res: SimResult, vref_V: np.ndarray, u_max_V: float, predicted: dict | None = None,
+              transient_s: float = 0.0, by_temperature_predicted=None) -> dict:
     """Steady-state figures and loop health of a run.
 
     Parameters
@@ -43,6 +44,12 @@ def summarize(res: SimResult, vref_V: np.ndarray, u_max_V: float, predicted: dic
         Upper limit of the PI output.
     predicted : dict, optional
         Analytic predictions to report beside the simulated values.
+    transient_s : float, optional
+        Samples this long after a change of applied rate or temperature are left out
+        of the scale-factor and bias estimates (the open-loop sense mode rings for
+        about 3 x 2 Q_s / w_s).
+    by_temperature_predicted : callable, optional
+        ``f(T) -> dict`` of predictions, reported beside each temperature hold.
 
     Returns
     -------
@@ -70,16 +77,20 @@ def summarize(res: SimResult, vref_V: np.ndarray, u_max_V: float, predicted: dic
         msgs.append(f"the drive amplitude is not within {SETTLE_BAND:.0%} of the set-point at the end of the run")
     settled = t >= (settle if np.isfinite(settle) else t[-1])
     true = res["rate_true_dps"]
-    rate_V = res["rate_V"]
-    sf = float("nan")
-    sf_source = "none"
-    use = settled & np.isfinite(rate_V)
-    if use.sum() > 10 and np.ptp(true[use]) > 0:
-        Afit = np.column_stack([true[use], np.ones(use.sum())])
-        sf = float(np.linalg.lstsq(Afit, rate_V[use], rcond=None)[0][0])
-        sf_source = "least squares of rate_V on rate_true_dps over settled samples"
-    zero = use & (true == 0)
-    bias = float(np.mean(res["rate_dps"][zero])) if zero.sum() > 0 else float("nan")
+    temp = res["temperature_C"]
+    quiet = settled & _quiet(t, true, temp, transient_s)
+    sf, sf_source, bias = _sf_and_bias(true, res["rate_V"], res["rate_dps"], quiet)
+    groups = []
+    holds = np.unique(np.round(temp[quiet], 6))
+    if len(holds) > 1 and len(holds) <= 20:
+        for T in holds:
+            m = quiet & (np.round(temp, 6) == T)
+            g_sf, _, g_bias = _sf_and_bias(true, res["rate_V"], res["rate_dps"], m)
+            row = dict(temperature_C=float(T), scale_factor_V_per_dps=g_sf, zero_rate_bias_dps=g_bias,
+                       samples=int(m.sum()))
+            if by_temperature_predicted is not None:
+                row["predicted"] = by_temperature_predicted(float(T))
+            groups.append(row)
     ff = f[tail][np.isfinite(f[tail])]
     out = dict(
         status=status, messages=msgs, engine=res.info.get("engine"),
@@ -90,10 +101,33 @@ def summarize(res: SimResult, vref_V: np.ndarray, u_max_V: float, predicted: dic
         agc_effort_V=float(np.nanmean(u[tail])), settling_time_s=settle,
         scale_factor_V_per_dps=sf, scale_factor_source=sf_source,
         nominal_scale_factor_V_per_dps=res.info.get("nominal_scale_factor_V_per_dps"),
-        zero_rate_bias_dps=bias,
+        zero_rate_bias_dps=bias, transient_excluded_s=transient_s,
         wall_time_s=res.info.get("wall_time_s"), simulated_time_s=res.info.get("simulated_time_s"),
         steps_per_cycle=res.info.get("steps_per_cycle"),
     )
+    if groups:
+        out["by_temperature"] = groups
     if predicted:
         out["predicted"] = predicted
     return out
+
+
+def _quiet(t: np.ndarray, true: np.ndarray, temp: np.ndarray, transient_s: float) -> np.ndarray:
+    """Samples at least ``transient_s`` after the last change of applied rate or temperature."""
+    change = np.zeros(len(t), dtype=bool)
+    change[1:] = (np.diff(true) != 0) | (np.diff(temp) != 0)
+    last_change = np.maximum.accumulate(np.where(change, t, -np.inf))
+    return (t - last_change) >= transient_s
+
+
+def _sf_and_bias(true, rate_V, rate_dps, use):
+    use = use & np.isfinite(rate_V)
+    sf, src, bias = float("nan"), "none", float("nan")
+    if use.sum() > 10 and np.ptp(true[use]) > 0:
+        Afit = np.column_stack([true[use], np.ones(use.sum())])
+        sf = float(np.linalg.lstsq(Afit, rate_V[use], rcond=None)[0][0])
+        src = "least squares of rate_V on rate_true_dps over settled samples away from rate/temperature changes"
+    zero = use & (true == 0)
+    if zero.sum() > 0:
+        bias = float(np.mean(rate_dps[zero]))
+    return sf, src, bias

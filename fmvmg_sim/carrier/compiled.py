@@ -163,7 +163,13 @@ def cache_dir() -> Path:
     return Path(root)
 
 
+_SOURCE: bytes | None = None
+
+
 def _c_source() -> bytes:
+    global _SOURCE
+    if _SOURCE is not None:
+        return _SOURCE
     f = step_function()
     with tempfile.TemporaryDirectory() as tmp:
         cwd = os.getcwd()
@@ -180,7 +186,8 @@ def _c_source() -> bytes:
         src = src.replace(marker, defs + _DRIVER + "\n" + marker)
     else:
         src = src + defs + _DRIVER
-    return src.encode()
+    _SOURCE = src.encode()
+    return _SOURCE
 
 
 def load_rollout(M: int, log=None) -> Rollout:

@@ -21,7 +21,9 @@ from ..result import SimResult
 from ..scenario import Scenario
 from .compiled import load_rollout
 from .plan import initial_state, make_plan
-from .step import N_NOISE, STATE
+from .step import N_NOISE, PARAMS, STATE
+
+STATE_P = PARAMS.size
 
 #: Temperatures are rounded to this step (K) when caching discretised operating points.
 T_QUANTUM_K = 1e-3
@@ -79,11 +81,14 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     scale = ref.core_state_scale()
     plans: dict[float, object] = {}
 
-    def plan_for(T):
+    def plan_key(T):
         key = round(T / T_QUANTUM_K) * T_QUANTUM_K
         if key not in plans:
-            plans[key] = (make_plan(build_diagram(dev, key), h, noise_on, scale), key)
-        return plans[key][0]
+            plans[key] = make_plan(build_diagram(dev, key), h, noise_on, scale)
+        return key
+
+    def plan_for(T):
+        return plans[plan_key(T)]
 
     p0 = plan_for(temp[0])
     x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
@@ -99,8 +104,12 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     any_noise = nz["brownian"] or nz["electronic"]
     for k0 in range(0, n, per_call):
         k1 = min(n, k0 + per_call)
-        P = np.stack([plan_for(temp[k]).params(np.deg2rad(rate_dps[k]), phase_flicker[k], trim, vref_f[k])
-                      for k in range(k0, k1)])
+        P = np.empty((k1 - k0, STATE_P))
+        Tq = [plan_key(temp[k]) for k in range(k0, k1)]
+        for key in set(Tq):
+            rows = np.array([i for i, q in enumerate(Tq) if q == key])
+            ks = rows + k0
+            P[rows] = plans[key].params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], trim, vref_f[ks])
         W = rng.standard_normal(((k1 - k0) * M, N_NOISE)) if any_noise else np.zeros(((k1 - k0) * M, N_NOISE))
         Xc = roll(x, P, W)
         X[k0:k1] = Xc

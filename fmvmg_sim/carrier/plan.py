@@ -41,31 +41,37 @@ class OperatingPlan:
     C_x: np.ndarray
     C_y: np.ndarray
     A_core: np.ndarray
+    _packed: np.ndarray | None = None
 
-    def params(self, rate_rad_s: float = 0.0, phase_offset_rad: float = 0.0, trim_rad: float = 0.0,
-               vref_factor: float = 1.0) -> np.ndarray:
-        """Packed parameter vector for a chunk at ``rate_rad_s`` with a demodulation phase offset.
+    def params(self, rate_rad_s=0.0, phase_offset_rad=0.0, trim_rad: float = 0.0, vref_factor=1.0) -> np.ndarray:
+        """Packed parameter vectors, one row per output sample (vectorised over the arguments).
 
         Parameters
         ----------
-        rate_rad_s : float, optional
-        phase_offset_rad : float, optional
+        rate_rad_s : float or ndarray, optional
+            Input rate.
+        phase_offset_rad : float or ndarray, optional
             Extra demodulation-reference phase (flicker, drift effects).
         trim_rad : float, optional
             The designed phase trim.
-        vref_factor : float, optional
+        vref_factor : float or ndarray, optional
             Multiplier of the amplitude set-point.
 
         Returns
         -------
-        ndarray
+        ndarray, shape (k, n_p)
         """
-        v = dict(self.base)
-        v["Phi"] = self.base["Phi"] + rate_rad_s * self.phi_rate
-        v["cos_ref"] = np.cos(trim_rad + phase_offset_rad)
-        v["sin_ref"] = np.sin(trim_rad + phase_offset_rad)
-        v["vref"] = self.base["vref"] * vref_factor
-        return PARAMS.pack(v)
+        rate = np.atleast_1d(np.asarray(rate_rad_s, dtype=float))
+        k = max(rate.size, np.size(phase_offset_rad), np.size(vref_factor))
+        if self._packed is None:
+            self._packed = PARAMS.pack(self.base)
+        P = np.repeat(self._packed[None, :], k, axis=0)
+        P[:, PARAMS.slices["Phi"]] += np.broadcast_to(rate, (k,))[:, None] * self.phi_rate.ravel()[None, :]
+        ph = trim_rad + np.broadcast_to(np.asarray(phase_offset_rad, dtype=float), (k,))
+        P[:, PARAMS.slices["cos_ref"]] = np.cos(ph)[:, None]
+        P[:, PARAMS.slices["sin_ref"]] = np.sin(ph)[:, None]
+        P[:, PARAMS.slices["vref"]] = self.base["vref"] * np.broadcast_to(np.asarray(vref_factor, dtype=float), (k,))[:, None]
+        return P
 
 
 def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.ndarray | None = None) -> OperatingPlan:
