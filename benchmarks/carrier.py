@@ -24,7 +24,8 @@ from scipy.integrate import solve_ivp
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from fmvmg_sim.averaged import steady_state  # noqa: E402
-from fmvmg_sim.carrier.compiled import cache_dir, load_rollout  # noqa: E402
+from fmvmg_sim.carrier.step import CARRIER_MODEL  # noqa: E402
+from fmvmg_sim.compiled import cache_dir, load_rollout  # noqa: E402
 from fmvmg_sim.carrier.engine import run_carrier  # noqa: E402
 from fmvmg_sim.diagram import build_diagram  # noqa: E402
 from fmvmg_sim.scenario import load_scenario  # noqa: E402
@@ -90,7 +91,7 @@ def main() -> int:
     a = ap.parse_args()
     # first-run compile time (fresh cache name by clearing the library if asked) and cached load
     t0 = time.perf_counter()
-    roll = load_rollout(10, log=lambda m: None)
+    roll = load_rollout(CARRIER_MODEL, log=lambda m: None)
     load_s = time.perf_counter() - t0
     scn = scenario(a.sim_s, a.steps_per_cycle)
     run_carrier(scenario(0.01, a.steps_per_cycle), progress=False)  # warm caches (plans, library)

@@ -19,9 +19,9 @@ from ..averaged import scale_factor_V_per_dps
 from ..diagram import build_diagram
 from ..result import SimResult
 from ..scenario import Scenario
-from .compiled import load_rollout
+from ..compiled import load_rollout
 from .plan import initial_state, make_plan
-from .step import N_NOISE, PARAMS, STATE
+from .step import CARRIER_MODEL, N_NOISE, PARAMS, STATE
 
 STATE_P = PARAMS.size
 
@@ -93,7 +93,7 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     p0 = plan_for(temp[0])
     x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
                       from_steady=scn.settings["initial"]["state"] == "steady")
-    roll = load_rollout(M, log)
+    roll = load_rollout(CARRIER_MODEL, log)
     per_call = max(1, int(round(CALL_S / dt_out)))
     X = np.empty((n, STATE.size))
     est_s = n * M * (110e-9 if roll.compiled else 1e-6) + 0.05 * len(np.unique(np.round(temp, 3)))
@@ -111,7 +111,7 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
             ks = rows + k0
             P[rows] = plans[key].params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], trim, vref_f[ks])
         W = rng.standard_normal(((k1 - k0) * M, N_NOISE)) if any_noise else np.zeros(((k1 - k0) * M, N_NOISE))
-        Xc = roll(x, P, W)
+        Xc = roll(x, P, W, M)
         X[k0:k1] = Xc
         x = Xc[-1]
         bar.update(k1 - k0)

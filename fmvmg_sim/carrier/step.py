@@ -14,7 +14,7 @@ The same function serves numerically (numpy backend, for tests) and symbolically
 
 from __future__ import annotations
 
-from blocks import FullWaveRectifier, LowPass2, Multiplier, PIController
+from blocks import FullWaveRectifier, Multiplier, PIController
 from blocks.ops import numpy_ops
 
 from .layout import Layout, dot, matvec
@@ -116,4 +116,9 @@ def _lpf_step(Phi, Gam, s, uin):
             Phi[1][0] * s[0] + Phi[1][1] * s[1] + Gam[1] * uin]
 
 
-__all__ = ["STATE", "PARAMS", "N_CORE", "N_NOISE", "step", "LowPass2"]
+from ..compiled import StepModel  # noqa: E402
+
+#: The carrier step as a compilable model.
+CARRIER_MODEL = StepModel("fmvmg_carrier", STATE, PARAMS, N_NOISE, step)
+
+__all__ = ["STATE", "PARAMS", "N_CORE", "N_NOISE", "step", "CARRIER_MODEL"]

@@ -1,0 +1,289 @@
+"""Compile a step function: CasADi builds it symbolically and generates C; gcc builds a library.
+
+A :class:`StepModel` is a step function ``x+ = f(x, p, w)`` written against a math
+backend, with the layouts of its state ``x``, its parameters ``p`` (which change
+every parameter block) and its per-step inputs ``w``. CasADi generates the C of one
+step; a short hand-written C loop in the same translation unit rolls it out, so gcc
+can inline it. Libraries are cached under ``$FMVMG_CACHE_DIR`` (default
+``~/.cache/fmvmg_sim``), keyed by a hash of the C source and the compiler command:
+the first run pays the compile (a few seconds), later runs load the library. Without
+a working C compiler the same roll-out runs in CasADi's virtual machine (several
+times slower) and the engine says so once.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+
+from .carrier.layout import Layout
+
+_WARNED = False
+CFLAGS = ["-O2", "-fPIC", "-shared"]
+
+_DRIVER = r"""
+#include <stdlib.h>
+#include <string.h>
+/* Roll the step function out. K parameter blocks; each block holds NOB outputs of MO steps.
+   x0[NX]; P[K][NP]; W[K*NOB*MO][NW]; X[K*NOB][NX] (the state after each output's last step). */
+CASADI_SYMBOL_EXPORT int PREFIX_rollout_c(const double* x0, const double* P, const double* W, double* X,
+                                         long MO, long K, long NOB) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  PREFIX_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real** arg = (const casadi_real**) malloc(sizeof(casadi_real*) * (sz_arg > 3 ? sz_arg : 3));
+  casadi_real** res = (casadi_real**) malloc(sizeof(casadi_real*) * (sz_res > 1 ? sz_res : 1));
+  casadi_int* iw = (casadi_int*) malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
+  casadi_real* w = (casadi_real*) malloc(sizeof(casadi_real) * (sz_w > 0 ? sz_w : 1));
+  double xa[NX], xb[NX];
+  memcpy(xa, x0, sizeof(double) * NX);
+  long s = 0;
+  for (long k = 0; k < K; ++k) {
+    const double* p = P + k * NP;
+    for (long o = 0; o < NOB; ++o) {
+      for (long m = 0; m < MO; ++m, ++s) {
+        arg[0] = xa; arg[1] = p; arg[2] = W + s * NW;
+        res[0] = xb;
+        PREFIX_step(arg, res, iw, w, 0);
+        memcpy(xa, xb, sizeof(double) * NX);
+      }
+      memcpy(X + (k * NOB + o) * NX, xa, sizeof(double) * NX);
+    }
+  }
+  free(arg); free(res); free(iw); free(w);
+  return 0;
+}
+"""
+
+
+class CasadiOps:
+    """CasADi backend of the carrier-face operations (see :mod:`blocks.ops`)."""
+
+    sqrt = staticmethod(ca.sqrt)
+    fabs = staticmethod(ca.fabs)
+    fmin = staticmethod(ca.fmin)
+    fmax = staticmethod(ca.fmax)
+    sin = staticmethod(ca.sin)
+    cos = staticmethod(ca.cos)
+    tan = staticmethod(ca.tan)
+    exp = staticmethod(ca.exp)
+
+    @staticmethod
+    def if_else(cond, a, b):
+        """``a if cond else b`` (both branches evaluated)."""
+        return ca.if_else(cond, a, b)
+
+
+@dataclass(frozen=True)
+class StepModel:
+    """A step function with its layouts.
+
+    Parameters
+    ----------
+    name : str
+        C identifier prefix.
+    state : Layout
+    params : Layout
+    n_inputs : int
+        Length of the per-step input vector ``w``.
+    step : callable
+        ``step(x, p, w, ops) -> list`` (the next state).
+    """
+
+    name: str
+    state: Layout
+    params: Layout
+    n_inputs: int
+    step: Callable
+
+    def casadi_function(self) -> ca.Function:
+        """The symbolic one-step function.
+
+        Returns
+        -------
+        casadi.Function
+        """
+        x = ca.SX.sym("x", self.state.size)
+        p = ca.SX.sym("p", self.params.size)
+        w = ca.SX.sym("w", self.n_inputs)
+        out = self.step([x[i] for i in range(self.state.size)], [p[i] for i in range(self.params.size)],
+                        [w[i] for i in range(self.n_inputs)], CasadiOps())
+        return ca.Function(f"{self.name}_step", [x, p, w], [ca.vertcat(*out)])
+
+
+class Rollout:
+    """``X = rollout(x0, P, W, steps_per_output, outputs_per_block)``.
+
+    Attributes
+    ----------
+    compiled : bool
+        Whether a compiled library is used (else CasADi's virtual machine).
+    compile_s : float
+        Compile time of this call (0 when loaded from the cache).
+    """
+
+    def __init__(self, model: StepModel, fn, compiled: bool, compile_s: float = 0.0, library: str | None = None):
+        self.model = model
+        self._fn = fn
+        self.compiled = compiled
+        self.compile_s = compile_s
+        self.library = library
+        self._vm: dict = {}
+
+    def __call__(self, x0: np.ndarray, P: np.ndarray, W: np.ndarray, steps_per_output: int,
+                 outputs_per_block: int = 1) -> np.ndarray:
+        """Run ``K = len(P)`` parameter blocks.
+
+        Parameters
+        ----------
+        x0 : ndarray, shape (n_x,)
+        P : ndarray, shape (K, n_p)
+        W : ndarray, shape (K * outputs_per_block * steps_per_output, n_w)
+        steps_per_output : int
+        outputs_per_block : int, optional
+
+        Returns
+        -------
+        ndarray, shape (K * outputs_per_block, n_x)
+        """
+        K = P.shape[0]
+        nx = self.model.state.size
+        Mo, nob = int(steps_per_output), int(outputs_per_block)
+        if W.shape != (K * nob * Mo, self.model.n_inputs):
+            raise ValueError(f"W has shape {W.shape}, expected {(K * nob * Mo, self.model.n_inputs)}")
+        if self.compiled:
+            x0 = np.ascontiguousarray(x0, dtype=float)
+            P = np.ascontiguousarray(P, dtype=float)
+            W = np.ascontiguousarray(W, dtype=float)
+            X = np.empty((K * nob, nx))
+            dp = ctypes.POINTER(ctypes.c_double)
+            self._fn(x0.ctypes.data_as(dp), P.ctypes.data_as(dp), W.ctypes.data_as(dp), X.ctypes.data_as(dp),
+                     ctypes.c_long(Mo), ctypes.c_long(K), ctypes.c_long(nob))
+            return X
+        key = (Mo, nob)
+        if key not in self._vm:
+            f = self.model.casadi_function()
+            inner = f.mapaccum("steps", Mo)
+            x0s = ca.MX.sym("x0", nx)
+            ps = ca.MX.sym("p", self.model.params.size)
+            Ws = ca.MX.sym("W", self.model.n_inputs, Mo)
+            one = ca.Function("one", [x0s, ps, Ws], [inner(x0s, ca.repmat(ps, 1, Mo), Ws)[:, Mo - 1]])
+            self._vm[key] = one.mapaccum("outs", nob)
+        F = self._vm[key]
+        out = []
+        x = np.asarray(x0, dtype=float)
+        Wt = W.T
+        n_blk = nob * Mo
+        for k in range(K):
+            Xk = np.asarray(F(x, P[k], Wt[:, k * n_blk:(k + 1) * n_blk])).T
+            out.append(Xk)
+            x = Xk[-1]
+        return np.vstack(out)
+
+
+def cache_dir() -> Path:
+    """Where compiled libraries are kept (``$FMVMG_CACHE_DIR`` or ``~/.cache/fmvmg_sim``).
+
+    Returns
+    -------
+    Path
+    """
+    root = os.environ.get("FMVMG_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "fmvmg_sim")
+    return Path(root)
+
+
+_SOURCES: dict[str, bytes] = {}
+
+
+def c_source(model: StepModel) -> bytes:
+    """The C source: CasADi's generated step plus the roll-out driver (memoised per process).
+
+    Parameters
+    ----------
+    model : StepModel
+
+    Returns
+    -------
+    bytes
+    """
+    if model.name in _SOURCES:
+        return _SOURCES[model.name]
+    f = model.casadi_function()
+    with tempfile.TemporaryDirectory() as tmp:
+        cwd = os.getcwd()
+        try:
+            os.chdir(tmp)
+            f.generate(f"{model.name}_step.c")
+        finally:
+            os.chdir(cwd)
+        src = (Path(tmp) / f"{model.name}_step.c").read_text()
+    defs = f"#define NX {model.state.size}\n#define NP {model.params.size}\n#define NW {model.n_inputs}\n"
+    driver = _DRIVER.replace("PREFIX", model.name)
+    marker = "#ifdef __cplusplus\n} /* extern \"C\" */\n#endif"
+    src = src.replace(marker, defs + driver + "\n" + marker) if marker in src else src + defs + driver
+    _SOURCES[model.name] = src.encode()
+    return _SOURCES[model.name]
+
+
+def load_rollout(model: StepModel, log=None) -> Rollout:
+    """The roll-out of ``model``, compiled and cached when a C compiler is available.
+
+    Parameters
+    ----------
+    model : StepModel
+    log : callable, optional
+        Receives one-line messages (compile time, fallback notice); default stderr.
+
+    Returns
+    -------
+    Rollout
+    """
+    global _WARNED
+    log = log or (lambda msg: sys.stderr.write(msg + "\n"))
+    cc = os.environ.get("CC") or "gcc"
+    cc_path = shutil.which(cc)
+    if cc_path is None or os.environ.get("FMVMG_NO_COMPILE"):
+        if not _WARNED:
+            log("fmvmg: no C compiler found (set CC): the engines run in CasADi's virtual machine, "
+                "10-20x slower than compiled code")
+            _WARNED = True
+        return Rollout(model, None, compiled=False)
+    src = c_source(model)
+    key = hashlib.sha256(src + " ".join([cc] + CFLAGS).encode()).hexdigest()[:20]
+    lib = cache_dir() / f"{model.name}_{key}.so"
+    compile_s = 0.0
+    if not lib.exists():
+        t0 = time.perf_counter()
+        lib.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            cpath = Path(tmp) / f"{model.name}.c"
+            cpath.write_bytes(src)
+            tmp_lib = lib.parent / f".{lib.name}.{os.getpid()}.tmp"
+            res = subprocess.run([cc_path, *CFLAGS, str(cpath), "-o", str(tmp_lib), "-lm"],
+                                 capture_output=True, text=True)
+            if res.returncode != 0:
+                if not _WARNED:
+                    log(f"fmvmg: C compile failed ({res.stderr.strip()[:200]}); "
+                        "the engines run in CasADi's virtual machine (slower)")
+                    _WARNED = True
+                return Rollout(model, None, compiled=False)
+            os.replace(tmp_lib, lib)
+        compile_s = time.perf_counter() - t0
+        log(f"fmvmg: compiled the {model.name} step function in {compile_s:.1f} s (cached in {lib.parent})")
+    cdll = ctypes.CDLL(str(lib))
+    fn = getattr(cdll, f"{model.name}_rollout_c")
+    dp = ctypes.POINTER(ctypes.c_double)
+    fn.argtypes = [dp, dp, dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long]
+    fn.restype = ctypes.c_int
+    return Rollout(model, fn, compiled=True, compile_s=compile_s, library=str(lib))
