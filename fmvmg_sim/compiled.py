@@ -59,6 +59,7 @@ CASADI_SYMBOL_EXPORT int PREFIX_rollout_c(const double* x0, const double* P, con
         memcpy(xa, xb, sizeof(double) * NX);
       }
       memcpy(X + (k * NOB + o) * NX, xa, sizeof(double) * NX);
+      for (int r = 0; r < NRESET; ++r) xa[RESET_IDX[r]] = 0.0;  /* integrate-and-dump accumulators */
     }
   }
   free(arg); free(res); free(iw); free(w);
@@ -99,6 +100,8 @@ class StepModel:
         Length of the per-step input vector ``w``.
     step : callable
         ``step(x, p, w, ops) -> list`` (the next state).
+    reset : tuple of str
+        State fields zeroed after each output sample (accumulators of integrate-and-dump outputs).
     """
 
     name: str
@@ -106,6 +109,20 @@ class StepModel:
     params: Layout
     n_inputs: int
     step: Callable
+    reset: tuple = ()
+
+    def reset_indices(self) -> list[int]:
+        """Flat state indices of the :attr:`reset` fields.
+
+        Returns
+        -------
+        list of int
+        """
+        idx = []
+        for name in self.reset:
+            sl = self.state.slices[name]
+            idx += list(range(sl.start, sl.stop))
+        return idx
 
     def casadi_function(self) -> ca.Function:
         """The symbolic one-step function.
@@ -141,6 +158,22 @@ class Rollout:
         self.library = library
         self._vm: dict = {}
 
+    def continue_from(self, x_last: np.ndarray) -> np.ndarray:
+        """The state to start the next call from: the last output row with its accumulators zeroed.
+
+        Parameters
+        ----------
+        x_last : ndarray
+            Last row returned by a call.
+
+        Returns
+        -------
+        ndarray
+        """
+        x = np.array(x_last, dtype=float, copy=True)
+        x[self.model.reset_indices()] = 0.0
+        return x
+
     def __call__(self, x0: np.ndarray, P: np.ndarray, W: np.ndarray, steps_per_output: int,
                  outputs_per_block: int = 1) -> np.ndarray:
         """Run ``K = len(P)`` parameter blocks.
@@ -156,6 +189,8 @@ class Rollout:
         Returns
         -------
         ndarray, shape (K * outputs_per_block, n_x)
+            The state after each output's last step, before its accumulators are zeroed
+            (continue with :meth:`continue_from`).
         """
         K = P.shape[0]
         nx = self.model.state.size
@@ -178,18 +213,21 @@ class Rollout:
             x0s = ca.MX.sym("x0", nx)
             ps = ca.MX.sym("p", self.model.params.size)
             Ws = ca.MX.sym("W", self.model.n_inputs, Mo)
-            one = ca.Function("one", [x0s, ps, Ws], [inner(x0s, ca.repmat(ps, 1, Mo), Ws)[:, Mo - 1]])
-            self._vm[key] = one.mapaccum("outs", nob)
+            self._vm[key] = ca.Function("one", [x0s, ps, Ws], [inner(x0s, ca.repmat(ps, 1, Mo), Ws)[:, Mo - 1]])
         F = self._vm[key]
-        out = []
-        x = np.asarray(x0, dtype=float)
+        reset = self.model.reset_indices()
+        out = np.empty((K * nob, nx))
+        x = np.asarray(x0, dtype=float).copy()
         Wt = W.T
-        n_blk = nob * Mo
+        i = 0
         for k in range(K):
-            Xk = np.asarray(F(x, P[k], Wt[:, k * n_blk:(k + 1) * n_blk])).T
-            out.append(Xk)
-            x = Xk[-1]
-        return np.vstack(out)
+            for o in range(nob):
+                x = np.asarray(F(x, P[k], Wt[:, i * Mo:(i + 1) * Mo])).ravel()
+                out[i] = x
+                x = x.copy()
+                x[reset] = 0.0
+                i += 1
+        return out
 
 
 def cache_dir() -> Path:
@@ -228,7 +266,10 @@ def c_source(model: StepModel) -> bytes:
         finally:
             os.chdir(cwd)
         src = (Path(tmp) / f"{model.name}_step.c").read_text()
-    defs = f"#define NX {model.state.size}\n#define NP {model.params.size}\n#define NW {model.n_inputs}\n"
+    idx = model.reset_indices()
+    defs = (f"#define NX {model.state.size}\n#define NP {model.params.size}\n#define NW {model.n_inputs}\n"
+            f"#define NRESET {len(idx)}\n"
+            f"static const int RESET_IDX[{max(1, len(idx))}] = {{{', '.join(map(str, idx)) or '0'}}};\n")
     driver = _DRIVER.replace("PREFIX", model.name)
     marker = "#ifdef __cplusplus\n} /* extern \"C\" */\n#endif"
     src = src.replace(marker, defs + driver + "\n" + marker) if marker in src else src + defs + driver

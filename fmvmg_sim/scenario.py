@@ -10,6 +10,7 @@
     seed = 1
     fidelity = "carrier"                  # carrier | envelope | auto (envelope above 60 s)
     steps_per_cycle = 32                  # carrier engine
+    envelope_step_s = 0.01                # envelope engine: longest step (exact discretisation)
 
     [initial]   drive_displacement_m = 10e-9, state = "rest" | "steady"
     [temperature]  start_C + segments (hold_s, ramp_to_C + rate_C_per_min | duration_s, step_to_C) or points
@@ -50,7 +51,7 @@ TOP_KEYS = ("scenario", "initial", "temperature", "rate", "vref", "noise", "circ
 
 DEFAULTS = {
     "scenario": {"name": "unnamed", "description": "", "device_file": "fmvmg_a", "output_rate_Hz": 1000.0,
-                 "seed": 0, "fidelity": "auto", "steps_per_cycle": 32, "envelope_step_s": 1e-3},
+                 "seed": 0, "fidelity": "auto", "steps_per_cycle": 32, "envelope_step_s": 0.01},
     "initial": {"drive_displacement_m": 10e-9, "state": "rest"},
     "noise": {"brownian": True, "electronic": True, "flicker": True, "quantization": True,
               "rate_random_walk": True},

@@ -46,3 +46,115 @@ def expm_derivative(A: np.ndarray, dA: np.ndarray, h: float) -> np.ndarray:
     M = np.zeros((2 * n, 2 * n))
     M[:n, :n], M[:n, n:], M[n:, n:] = A, dA, A
     return expm(M * h)[:n, n:]
+
+
+def foh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact first-order-hold discretisation (input linear between samples).
+
+    ``x_{k+1} = Phi x_k + G0 u_k + G1 u_{k+1}``.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+    B : ndarray, shape (n, m)
+    h : float
+
+    Returns
+    -------
+    tuple of ndarray
+        (Phi, G0, G1)
+    """
+    n, m = A.shape[0], B.shape[1]
+    M = np.zeros((n + 2 * m, n + 2 * m))
+    M[:n, :n] = A * h
+    M[:n, n:n + m] = B * h
+    M[n:n + m, n + m:] = np.eye(m)
+    E = expm(M)
+    Phi, P0, P1 = E[:n, :n], E[:n, n:n + m], E[:n, n + m:]
+    # P0 = int_0^h e^{A(h-s)} B ds ; P1 = int_0^h e^{A(h-s)} B (s/h) ds
+    return Phi, P0 - P1, P1
+
+
+def noise_covariance(A: np.ndarray, G: np.ndarray, Qc: np.ndarray, h: float) -> np.ndarray:
+    """Covariance added over one step by white noise ``G w``, ``E[w w^T] = Qc delta``: ``int e^{As} G Qc G^T e^{A^T s} ds``.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+    G : ndarray, shape (n, m)
+    Qc : ndarray, shape (m, m)
+        Two-sided intensity (one-sided PSD / 2).
+    h : float
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    n = A.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = -A
+    M[:n, n:] = G @ Qc @ G.T
+    M[n:, n:] = A.T
+    E = expm(M * h)
+    Phi = E[n:, n:].T
+    Q = Phi @ E[:n, n:]
+    return 0.5 * (Q + Q.T)
+
+
+def covariance_sqrt(Q: np.ndarray) -> np.ndarray:
+    """A square root ``L`` with ``L L^T = Q`` for a symmetric positive semi-definite ``Q``.
+
+    Parameters
+    ----------
+    Q : ndarray
+
+    Returns
+    -------
+    ndarray
+    """
+    w, V = np.linalg.eigh(Q)
+    return V * np.sqrt(np.clip(w, 0.0, None))[None, :]
+
+
+def noise_factor(A: np.ndarray, G: np.ndarray, Qc: np.ndarray, h: float) -> np.ndarray:
+    """Lower-triangular ``L`` with ``L L^T`` the one-step noise covariance (see :func:`noise_covariance`).
+
+    States the noise cannot reach (structurally, through the non-zero entries of ``A``)
+    get exactly zero rows; the reachable block is balanced by its own standard
+    deviations before the Cholesky factorisation, so states of very different units
+    (metres and volts) are factored accurately. The factor is unique and smooth in the
+    parameters, so factors at neighbouring temperatures can be interpolated.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+    G : ndarray, shape (n, m)
+    Qc : ndarray, shape (m, m)
+        Two-sided intensity.
+    h : float
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    n = A.shape[0]
+    active = np.diag(Qc) > 0
+    reach = np.any(G[:, active] != 0, axis=1) if active.any() else np.zeros(n, dtype=bool)
+    while True:
+        grown = reach | np.any((A[:, reach] != 0), axis=1)
+        if np.array_equal(grown, reach):
+            break
+        reach = grown
+    L = np.zeros((n, n))
+    if not reach.any():
+        return L
+    R = np.flatnonzero(reach)
+    Ar, Gr = A[np.ix_(R, R)], G[R]
+    Q1 = noise_covariance(Ar, Gr, Qc, h)
+    d = np.sqrt(np.clip(np.diag(Q1), 0.0, None))
+    d = np.where(d > 0, d, 1.0)
+    As, Gs = Ar * (d[None, :] / d[:, None]), Gr / d[:, None]
+    Qs = noise_covariance(As, Gs, Qc, h)
+    Ls = np.linalg.cholesky(Qs + 1e-13 * np.eye(len(R)))
+    L[np.ix_(R, R)] = d[:, None] * Ls
+    return L

@@ -113,13 +113,14 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
         W = rng.standard_normal(((k1 - k0) * M, N_NOISE)) if any_noise else np.zeros(((k1 - k0) * M, N_NOISE))
         Xc = roll(x, P, W, M)
         X[k0:k1] = Xc
-        x = Xc[-1]
+        x = roll.continue_from(Xc[-1])
         bar.update(k1 - k0)
     bar.close()
     # --- record channels ---------------------------------------------------------------
     lsb = dev.values["noise"]["quantization_lsb_V"] if nz["quantization"] else 0.0
-    rate_V = noisegen.quantize(_state(X, "s_i")[:, 0] + out_flicker_V + rrw_V, lsb)
-    quad_V = noisegen.quantize(_state(X, "s_q")[:, 0], lsb)
+    # the DAQ integrates over each output interval (integrate-and-dump, no aliasing of the white noise)
+    rate_V = noisegen.quantize(_state(X, "acc_rate")[:, 0] / M + out_flicker_V + rrw_V, lsb)
+    quad_V = noisegen.quantize(_state(X, "acc_quad")[:, 0] / M, lsb)
     ncross, tlast = _state(X, "ncross")[:, 0], _state(X, "tlast")[:, 0]
     freq = np.full(n, np.nan)
     dn = np.diff(ncross)
@@ -133,7 +134,8 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     channels = dict(
         time_s=t_end, temperature_C=np.asarray(scn.temperature(t_end), dtype=float),
         rate_dps=rate_V / sf_nom, rate_V=rate_V, rate_true_dps=rate_end, quadrature_V=quad_V,
-        drive_amplitude_V=_state(X, "s_amp")[:, 0], agc_effort_V=_state(X, "u")[:, 0], drive_frequency_Hz=freq,
+        drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
+        drive_frequency_Hz=freq,
     )
     internal = dict(drive_displacement_amplitude_m=amp_m, modulator_norm=_state(X, "n")[:, 0])
     wall = time.perf_counter() - wall0

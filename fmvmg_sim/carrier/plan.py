@@ -174,7 +174,8 @@ def initial_state(plan: OperatingPlan, drive_displacement_m: float = 10e-9, from
     amp = max(np.hypot(vx, vps), b["n_floor_V"])
     n = b["vdac"] / amp if b["normalized"] else 1.0
     x = dict(z=z, s_amp=[0.0, 0.0], integ=0.0, u=0.0, n=n, vx=vx, vps=vps, vs=vs, s_i=[0.0, 0.0], s_q=[0.0, 0.0],
-             fq=b["quad_coef"] * b["vdc2"], t=0.0, ncross=0.0, tlast=0.0)
+             fq=b["quad_coef"] * b["vdc2"], t=0.0, ncross=0.0, tlast=0.0,
+             acc_rate=0.0, acc_quad=0.0, acc_amp=0.0, acc_u=0.0)
     if from_steady:
         x["s_amp"] = [b["vref"], 0.0]
         x["u"] = ss.agc_effort_V

@@ -26,6 +26,7 @@ STATE = Layout([
     ("z", (N_CORE,)), ("s_amp", (2,)), ("integ", ()), ("u", ()), ("n", ()),
     ("vx", ()), ("vps", ()), ("vs", ()), ("s_i", (2,)), ("s_q", (2,)), ("fq", ()),
     ("t", ()), ("ncross", ()), ("tlast", ()),
+    ("acc_rate", ()), ("acc_quad", ()), ("acc_amp", ()), ("acc_u", ()),
 ])
 
 PARAMS = Layout([
@@ -107,8 +108,9 @@ def step(x, p, w, ops=numpy_ops):
     tc = t0 + h * (-vx0) / ops.if_else(up, vx1 - vx0, 1.0)
     ncross = S(x, "ncross") + up
     tlast = ops.if_else(up, tc, S(x, "tlast"))
-    out = z1 + s_amp + [integ1, u1, n1, vx1, vps1, vs1] + s_i + s_q + [fq1, t0 + h, ncross, tlast]
-    return out
+    # integrate-and-dump outputs (sums over the output interval; the roll-out zeroes them after each sample)
+    acc = [S(x, "acc_rate") + s_i[0], S(x, "acc_quad") + s_q[0], S(x, "acc_amp") + s_amp[0], S(x, "acc_u") + u1]
+    return z1 + s_amp + [integ1, u1, n1, vx1, vps1, vs1] + s_i + s_q + [fq1, t0 + h, ncross, tlast] + acc
 
 
 def _lpf_step(Phi, Gam, s, uin):
@@ -119,6 +121,7 @@ def _lpf_step(Phi, Gam, s, uin):
 from ..compiled import StepModel  # noqa: E402
 
 #: The carrier step as a compilable model.
-CARRIER_MODEL = StepModel("fmvmg_carrier", STATE, PARAMS, N_NOISE, step)
+CARRIER_MODEL = StepModel("fmvmg_carrier", STATE, PARAMS, N_NOISE, step,
+                          reset=("acc_rate", "acc_quad", "acc_amp", "acc_u"))
 
 __all__ = ["STATE", "PARAMS", "N_CORE", "N_NOISE", "step", "CARRIER_MODEL"]

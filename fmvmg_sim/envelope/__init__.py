@@ -1,0 +1,1 @@
+"""Averaged (complex-envelope) engine: the same diagram, for hours-long temperature scenarios."""

@@ -1,0 +1,169 @@
+"""Run a scenario with the averaged model: hours of oven time in seconds.
+
+The run is cut into parameter blocks of about a second; each block gets the averaged
+model discretised at its temperature, interpolated (cubic) from operating points on a
+2.5 K grid over the temperatures the scenario visits. Per-step inputs are the noise
+draws, the rate, the set-point factor and the demodulation-phase flicker.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from tqdm import tqdm
+
+from .. import noise as noisegen
+from ..averaged import scale_factor_V_per_dps
+from ..compiled import load_rollout
+from ..diagram import build_diagram
+from ..result import SimResult
+from ..scenario import Scenario
+from .model import PARAMS, operating_params
+from .step import ENVELOPE_MODEL, N_IN, STATE
+
+#: Spacing of the temperature grid on which the averaged model is discretised (K).
+T_GRID_K = 2.5
+#: Target length of a parameter block (s).
+BLOCK_S = 1.0
+#: Simulated seconds per compiled call.
+CALL_S = 600.0
+
+
+class _ParamTable:
+    """Packed parameter vectors of the averaged model as a smooth function of temperature."""
+
+    def __init__(self, device, h_s, noise_on, t_lo, t_hi):
+        if t_hi - t_lo < 1e-6:
+            grid = np.array([t_lo])
+        else:
+            n = max(4, int(np.ceil((t_hi - t_lo) / T_GRID_K)) + 3)
+            grid = np.linspace(t_lo - T_GRID_K, t_hi + T_GRID_K, n)
+        self.grid = grid
+        rows, self.extra = [], []
+        for T in grid:
+            op = operating_params(build_diagram(device, float(T)), h_s, noise_on)
+            rows.append(PARAMS.pack(op))
+            self.extra.append(op)
+        self.table = np.array(rows)
+        self.spline = CubicSpline(grid, self.table, axis=0) if len(grid) > 1 else None
+
+    def __call__(self, T: np.ndarray) -> np.ndarray:
+        T = np.atleast_1d(T)
+        if self.spline is None:
+            return np.repeat(self.table, len(T), axis=0)
+        return self.spline(T)
+
+
+def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimResult:
+    """Simulate ``scn`` with the averaged (envelope) model.
+
+    Parameters
+    ----------
+    scn : Scenario
+    progress : bool, optional
+        Progress bar on stderr (default: when the run is expected to take > 3 s).
+    log : callable, optional
+
+    Returns
+    -------
+    SimResult
+    """
+    log = log or (lambda m: sys.stderr.write(m + "\n"))
+    wall0 = time.perf_counter()
+    dev = scn.device
+    st = scn.settings["scenario"]
+    dt_out = 1.0 / st["output_rate_Hz"]
+    Mo = max(1, int(np.ceil(dt_out / st["envelope_step_s"] - 1e-9)))
+    h = dt_out / Mo
+    n_out = int(np.ceil(scn.duration_s / dt_out - 1e-9))
+    nob = max(1, min(n_out, int(round(BLOCK_S / dt_out))))
+    K = int(np.ceil(n_out / nob))
+    n_out_pad = K * nob
+    t_out = (np.arange(n_out_pad) + 1) * dt_out
+    t_step = (np.arange(n_out_pad * Mo) + 1) * h
+    t_blk = (np.arange(K) + 0.5) * nob * dt_out
+    temp_blk = np.asarray(scn.temperature(t_blk), dtype=float)
+    temp_all = np.asarray(scn.temperature(t_out), dtype=float)
+    nz = scn.noise
+    noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
+    tab = _ParamTable(dev, h, noise_on, float(min(temp_blk.min(), temp_all.min())),
+                      float(max(temp_blk.max(), temp_all.max())))
+    P_all = tab(temp_blk)
+    rng = np.random.default_rng(scn.seed)
+    n_steps = len(t_step)
+    phase = (noisegen.flicker(n_steps, 1.0 / h, dev.values["noise"]["flicker_phase_rad2"], rng)
+             if nz["flicker"] else np.zeros(n_steps))
+    ref = build_diagram(dev, dev.reference_temperature_C)
+    sf_nom = scale_factor_V_per_dps(ref)
+    out_flicker_V = (noisegen.flicker(n_out_pad, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng)
+                     * sf_nom if nz["flicker"] else np.zeros(n_out_pad))
+    rrw_V = (noisegen.random_walk(n_out_pad, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"],
+                                  rng) * sf_nom if nz["rate_random_walk"] else np.zeros(n_out_pad))
+    rate_step = np.deg2rad(np.asarray(scn.rate(t_step), dtype=float))
+    fac_step = np.asarray(scn.vref_factor(t_step), dtype=float)
+    x = _initial(scn, tab, temp_blk[0])
+    roll = load_rollout(ENVELOPE_MODEL, log)
+    any_noise = nz["brownian"] or nz["electronic"]
+    blocks_per_call = max(1, int(round(CALL_S / (nob * dt_out))))
+    X = np.empty((n_out_pad, STATE.size))
+    show = progress if progress is not None else n_steps > 3e6
+    bar = tqdm(total=K, disable=not show, file=sys.stderr, unit="block", desc=f"envelope {scn.name}",
+               mininterval=0.5)
+    steps_blk = nob * Mo
+    for k0 in range(0, K, blocks_per_call):
+        k1 = min(K, k0 + blocks_per_call)
+        s0, s1 = k0 * steps_blk, k1 * steps_blk
+        W = np.empty((s1 - s0, N_IN))
+        nn = N_IN - 3
+        W[:, :nn] = rng.standard_normal((s1 - s0, nn)) if any_noise else 0.0
+        W[:, nn] = rate_step[s0:s1]
+        W[:, nn + 1] = fac_step[s0:s1]
+        W[:, nn + 2] = phase[s0:s1]
+        Xc = roll(x, P_all[k0:k1], W, Mo, nob)
+        X[k0 * nob:k1 * nob] = Xc
+        x = roll.continue_from(Xc[-1])
+        bar.update(k1 - k0)
+    bar.close()
+    X, t_out = X[:n_out], t_out[:n_out]
+    out_flicker_V, rrw_V = out_flicker_V[:n_out], rrw_V[:n_out]
+    get = lambda name: X[:, STATE.slices[name]]  # noqa: E731
+    lsb = dev.values["noise"]["quantization_lsb_V"] if nz["quantization"] else 0.0
+    rate_V = noisegen.quantize(get("rate_V")[:, 0] + out_flicker_V + rrw_V, lsb)
+    quad_V = noisegen.quantize(get("quad_V")[:, 0], lsb)
+    channels = dict(
+        time_s=t_out, temperature_C=np.asarray(scn.temperature(t_out), dtype=float),
+        rate_dps=rate_V / sf_nom, rate_V=rate_V, rate_true_dps=np.asarray(scn.rate(t_out), dtype=float),
+        quadrature_V=quad_V, drive_amplitude_V=get("amp_V")[:, 0], agc_effort_V=get("agc_V")[:, 0],
+        drive_frequency_Hz=get("freq_Hz")[:, 0],
+    )
+    internal = dict(drive_displacement_amplitude_m=get("d")[:, 0])
+    wall = time.perf_counter() - wall0
+    info = dict(engine="envelope", step_s=h, steps_per_output=Mo, output_interval_s=dt_out,
+                nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,
+                wall_time_s=wall, simulated_time_s=float(t_out[-1]), temperature_grid_points=len(tab.grid),
+                steps_per_cycle=None)
+    meta = {"device": dev.name, "source": "simulation", "engine": "envelope", "scenario": scn.name,
+            "seed": str(scn.seed), "nominal_scale_factor_V_per_dps": f"{sf_nom:.9g}"}
+    return SimResult(channels, internal, info, meta)
+
+
+def _initial(scn: Scenario, tab: _ParamTable, T0: float) -> np.ndarray:
+    """Initial envelope state: at rest with the initial displacement, or on the averaged steady state."""
+    k = int(np.argmin(np.abs(tab.grid - T0)))
+    op = tab.extra[k]
+    ss = op["steady"]
+    x = dict(d=np.zeros(4), jd=0.0, s=np.zeros(6), js=np.zeros(2), u=0.0, w_rate=np.deg2rad(float(scn.rate(0.0))),
+             vref_f=float(scn.vref_factor(0.0)), acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0,
+             agc_V=0.0, freq_Hz=ss.f_Hz)
+    if scn.settings["initial"]["state"] == "steady":
+        x["d"] = np.array([ss.amplitude_m, op["vref0"] * x["vref_f"], 0.0,
+                           ss.agc_effort_V / op["ki"] if op["ki"] > 0 else 0.0])
+        x["s"] = op["sense_steady"][:6]
+        x["u"] = ss.agc_effort_V
+        x["rate_V"], x["quad_V"] = ss.rate_V, ss.quadrature_V
+    else:
+        x["d"][0] = scn.settings["initial"]["drive_displacement_m"]
+    return STATE.pack(x)
