@@ -33,6 +33,15 @@ def save_figure(fig, path: str | Path) -> None:
             tmp.unlink()
 
 
+def _thin(t: np.ndarray, *ys, n_max: int = 20000):
+    """Block means so a plot has at most ``n_max`` points per line."""
+    k = max(1, len(t) // n_max)
+    if k == 1:
+        return (t, *ys)
+    m = len(t) // k * k
+    return tuple(np.asarray(a)[:m].reshape(-1, k).mean(axis=1) for a in (t, *ys))
+
+
 def plot_startup(res: SimResult, vref_V: np.ndarray, path: str | Path) -> None:
     """Start-up envelope: amplitude estimate against its set-point, AGC effort, mechanical amplitude.
 
@@ -42,16 +51,16 @@ def plot_startup(res: SimResult, vref_V: np.ndarray, path: str | Path) -> None:
     vref_V : ndarray
     path : str or Path
     """
-    t = res.time_s
+    mech = res.internal.get("drive_displacement_amplitude_m", np.full(len(res.time_s), np.nan))
+    t, amp, vref, u, mech = _thin(res.time_s, res["drive_amplitude_V"], vref_V, res["agc_effort_V"], mech)
     fig, ax = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
-    ax[0].plot(t, res["drive_amplitude_V"], label="drive amplitude estimate (rectifier + LPF)")
-    ax[0].plot(t, vref_V, "k--", lw=1, label="set-point Vref")
+    ax[0].plot(t, amp, label="drive amplitude estimate (rectifier + LPF)")
+    ax[0].plot(t, vref, "k--", lw=1, label="set-point Vref")
     ax[0].set_ylabel("V")
     ax[0].legend(loc="lower right")
-    ax[1].plot(t, res["agc_effort_V"], color="C1")
+    ax[1].plot(t, u, color="C1")
     ax[1].set_ylabel("AGC effort u (V)")
-    if "drive_displacement_amplitude_m" in res.internal:
-        ax[2].plot(t, res.internal["drive_displacement_amplitude_m"] * 1e6, color="C2")
+    ax[2].plot(t, mech * 1e6, color="C2")
     ax[2].set_ylabel("drive amplitude (um)")
     ax[2].set_xlabel("time (s)")
     ax[0].set_title("Drive loop start-up")
@@ -69,15 +78,16 @@ def plot_channels(res: SimResult, path: str | Path) -> None:
     res : SimResult
     path : str or Path
     """
-    t = res.time_s
     names = [("rate_dps", "rate (deg/s)"), ("quadrature_V", "quadrature (V)"), ("drive_amplitude_V", "drive amp. (V)"),
              ("agc_effort_V", "AGC effort (V)"), ("drive_frequency_Hz", "drive freq. (Hz)"),
              ("temperature_C", "temperature (C)")]
     fig, ax = plt.subplots(len(names), 1, figsize=(8, 10), sharex=True)
     for a, (k, label) in zip(ax, names):
-        a.plot(t, res[k], lw=0.8)
+        t, y = _thin(res.time_s, res[k])
+        a.plot(t, y, lw=0.8)
         if k == "rate_dps":
-            a.plot(t, res["rate_true_dps"], "k--", lw=0.8, label="applied rate")
+            t, y = _thin(res.time_s, res["rate_true_dps"])
+            a.plot(t, y, "k--", lw=0.8, label="applied rate")
             a.legend(loc="upper right")
         a.set_ylabel(label)
         a.grid(alpha=0.3)

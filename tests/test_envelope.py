@@ -112,3 +112,18 @@ def test_noise_factor_reproduces_badly_scaled_covariances():
     assert np.allclose((L @ L.T) / np.outer(d, d), Q / np.outer(d, d), atol=1e-9)
     L2 = noise_factor(A, G, np.diag([0.0, 1e-8]), 0.01)
     assert np.all(L2[0] == 0)  # the first state is not reachable from the remaining noise
+
+
+def test_temperature_interpolation_of_the_discretised_model_is_accurate():
+    from fmvmg_sim.device import load_device
+    from fmvmg_sim.envelope.engine import _ParamTable
+    from fmvmg_sim.envelope.model import PARAMS, operating_params
+    dev = load_device("fmvmg_a")
+    on = {"brownian": True, "electronic": True}
+    tab = _ParamTable(dev, 0.01, on, -40.0, 85.0)
+    for T in (12.34, -33.3, 71.7):
+        Pi = tab(T)[0]
+        Pd = PARAMS.pack(operating_params(build_diagram(dev, T), 0.01, on))
+        for name, sl in PARAMS.slices.items():
+            scale = max(np.max(np.abs(Pd[sl])), 1e-300)
+            assert np.max(np.abs(Pi[sl] - Pd[sl])) <= 1e-6 * scale, (T, name)

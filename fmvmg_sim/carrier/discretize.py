@@ -155,6 +155,12 @@ def noise_factor(A: np.ndarray, G: np.ndarray, Qc: np.ndarray, h: float) -> np.n
     d = np.where(d > 0, d, 1.0)
     As, Gs = Ar * (d[None, :] / d[:, None]), Gr / d[:, None]
     Qs = noise_covariance(As, Gs, Qc, h)
-    Ls = np.linalg.cholesky(Qs + 1e-13 * np.eye(len(R)))
+    try:
+        Ls = np.linalg.cholesky(Qs + 1e-13 * np.eye(len(R)))
+    except np.linalg.LinAlgError:  # numerically rank-deficient: triangular factor of the PSD square root
+        w, V = np.linalg.eigh(0.5 * (Qs + Qs.T))
+        root = V * np.sqrt(np.clip(w, 0.0, None))[None, :]
+        r = np.linalg.qr(root.T, mode="r")
+        Ls = r.T * np.where(np.diag(r) < 0, -1.0, 1.0)[None, :]
     L[np.ix_(R, R)] = d[:, None] * Ls
     return L

@@ -2,7 +2,7 @@
 
 The run is cut into parameter blocks of about a second; each block gets the averaged
 model discretised at its temperature, interpolated (cubic) from operating points on a
-2.5 K grid over the temperatures the scenario visits. Per-step inputs are the noise
+5 K grid over the temperatures the scenario visits. Per-step inputs are the noise
 draws, the rate, the set-point factor and the demodulation-phase flicker.
 """
 
@@ -25,7 +25,7 @@ from .model import PARAMS, operating_params
 from .step import ENVELOPE_MODEL, N_IN, STATE
 
 #: Spacing of the temperature grid on which the averaged model is discretised (K).
-T_GRID_K = 2.5
+T_GRID_K = 5.0
 #: Target length of a parameter block (s).
 BLOCK_S = 1.0
 #: Simulated seconds per compiled call.
