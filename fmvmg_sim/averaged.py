@@ -96,25 +96,44 @@ def carrier_phasors(dg: Diagram, V_x: complex, V_ps: complex) -> tuple[complex, 
     return carrier, ref_i, ref_q
 
 
-def drive_loop_phase(dg: Diagram, omega: float) -> float:
+def drive_response(dg: Diagram, omega: float, rate_rad_s: float = 0.0) -> np.ndarray:
+    """Resonator state phasors (x, x', y, y') per newton of drive force at ``omega``.
+
+    The full two-mode model, so the sense mode's back-action on the drive (through the
+    quadrature and damping coupling and the Coriolis force) is included; it matters when
+    the mode split is small (config B, the dual-mass gyro).
+
+    Parameters
+    ----------
+    dg : Diagram
+    omega : float
+    rate_rad_s : float, optional
+
+    Returns
+    -------
+    ndarray of complex, shape (4,)
+    """
+    r = dg.resonator
+    M = 1j * omega * np.eye(4) - r.state_matrix(rate_rad_s)
+    return np.linalg.solve(M, np.array([0, 1 / r.m_drive_kg, 0, 0], dtype=complex))
+
+
+def drive_loop_phase(dg: Diagram, omega: float, rate_rad_s: float = 0.0) -> float:
     """Phase (rad) of the open drive loop x -> F_x -> x at ``omega``; zero where it oscillates.
 
     Parameters
     ----------
     dg : Diagram
     omega : float
+    rate_rad_s : float, optional
 
     Returns
     -------
     float
     """
-    r = dg.resonator
-    Zd = r.k_drive_N_per_m - r.m_drive_kg * omega ** 2 + 1j * omega * r.c_drive_N_s_per_m
     Hx = dg.drive_chain_response(omega)
-    V_x = Hx
-    V_ps = Hx * dg.phase_shifter_response(omega)
-    carrier, _, _ = carrier_phasors(dg, V_x, V_ps)
-    return float(np.angle(carrier / Zd))
+    carrier, _, _ = carrier_phasors(dg, Hx, Hx * dg.phase_shifter_response(omega))
+    return float(np.angle(carrier * drive_response(dg, omega, rate_rad_s)[0]))
 
 
 def loop_phase_error(dg: Diagram) -> float:
@@ -137,21 +156,75 @@ def loop_phase_error(dg: Diagram) -> float:
     return float(np.angle(carrier) - np.pi / 2)
 
 
-def oscillation_frequency(dg: Diagram) -> float:
-    """Angular frequency at which the drive loop phase is zero.
+def ripple_feedback(dg: Diagram, omega: float, V_ps: complex) -> complex:
+    """2-omega phasor of the PI output caused by the rectifier ripple that leaks through the LPF (4).
+
+    ``|cos| = 2/pi + (4/(3 pi)) cos(2 theta) - ...``: the ripple passes the amplitude LPF and
+    the PI; multiplied by the carrier in the modulator it adds ``U2 conj(C) / 2`` to the
+    drive force's fundamental. Negligible for the 30.7 kHz FMVMG (1e-4 of the effort), about
+    1 % for the 3.5 kHz dual-mass gyro with the same 200 Hz filter.
 
     Parameters
     ----------
     dg : Diagram
+    omega : float
+        Oscillation frequency.
+    V_ps : complex
+        Phasor of the phase-shifted pickoff (the rectifier input).
+
+    Returns
+    -------
+    complex
+    """
+    R2 = dg.rectifier.gain * 4.0 / (3.0 * np.pi) * abs(V_ps) * np.exp(2j * np.angle(V_ps))
+    H2 = dg.amplitude_lpf.frequency_response(2 * omega)[0, 0]
+    pi2 = dg.pi.kp + dg.pi.ki_per_s / (2j * omega)
+    return complex(-pi2 * H2 * R2)
+
+
+def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float):
+    """Complex AGC effort that holds a drive amplitude ``A`` at ``omega`` (real at the oscillation frequency)."""
+    Hx = dg.drive_chain_response(omega)
+    V_x, V_ps = Hx * A, Hx * dg.phase_shifter_response(omega) * A
+    carrier, R_I, R_Q = carrier_phasors(dg, V_x, V_ps)
+    z1 = drive_response(dg, omega, rate_rad_s)
+    F = A / z1[0]
+    V_ac = F / dg.comb_drive.linear_coef_N_per_V
+    U2 = ripple_feedback(dg, omega, V_ps)
+    u = (V_ac / dg.modulator.k_per_V - 0.5 * U2 * np.conj(carrier)) / carrier
+    return u, dict(V_x=V_x, V_ps=V_ps, carrier=carrier, R_I=R_I, R_Q=R_Q, z1=z1, F=F, V_ac=V_ac)
+
+
+def _amplitude(dg: Diagram, omega: float, vref: float) -> float:
+    vps_amp = (vref - dg.rectifier.offset_V) / dg.rectifier.describing_gain()
+    return vps_amp / abs(dg.drive_chain_response(omega) * dg.phase_shifter_response(omega))
+
+
+def oscillation_frequency(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = None) -> float:
+    """Angular frequency at which the closed drive loop oscillates.
+
+    Where the loop's phase balances: the AGC effort that holds the amplitude is real.
+    Includes the sense mode's back-action on the drive and the rectifier-ripple feedback.
+
+    Parameters
+    ----------
+    dg : Diagram
+    rate_rad_s : float, optional
+    vref_V : float, optional
 
     Returns
     -------
     float
         rad/s.
     """
+    vref = dg.vref_V if vref_V is None else vref_V
     w0 = dg.omega_drive_rad_s
     span = max(20.0 / dg.resonator.q_drive, 1e-4)
-    return float(brentq(lambda w: drive_loop_phase(dg, w), w0 * (1 - span), w0 * (1 + span), xtol=1e-9, rtol=1e-15))
+
+    def imag_u(w):
+        return _loop(dg, w, _amplitude(dg, w, vref), rate_rad_s)[0].imag
+
+    return float(brentq(imag_u, w0 * (1 - span), w0 * (1 + span), xtol=1e-9, rtol=1e-15))
 
 
 def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = None) -> SteadyState:
@@ -170,37 +243,21 @@ def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = No
     SteadyState
     """
     vref = dg.vref_V if vref_V is None else vref_V
-    r = dg.resonator
-    w = oscillation_frequency(dg)
-    Hx = dg.drive_chain_response(w)
-    Hps = dg.phase_shifter_response(w)
-    vps_amp = (vref - dg.rectifier.offset_V) / dg.rectifier.describing_gain()
-    A = vps_amp / abs(Hx * Hps)
-    # the phase reference is the drive displacement: X real positive
-    X = complex(A)
-    V_x, V_ps = Hx * X, Hx * Hps * X
-    carrier, R_I, R_Q = carrier_phasors(dg, V_x, V_ps)
-    # full two-mode response to the drive force: (i w I - A) z = B F
-    Amat = r.state_matrix(rate_rad_s)
-    M = 1j * w * np.eye(4) - Amat
-    # F_x such that the drive displacement equals X: solve with unit force, scale
-    z1 = np.linalg.solve(M, np.array([0, 1 / r.m_drive_kg, 0, 0], dtype=complex))
-    F = X / z1[0]
-    z = z1 * F
-    Y = z[2]
-    k_lin = dg.comb_drive.linear_coef_N_per_V
-    V_ac = F / k_lin
-    g0 = abs(V_ac) / abs(V_ps)
-    u0 = abs(V_ac) / (dg.modulator.k_per_V * abs(carrier))
+    w = oscillation_frequency(dg, rate_rad_s, vref)
+    A = _amplitude(dg, w, vref)
+    u, p = _loop(dg, w, A, rate_rad_s)
+    X = complex(A)  # the phase reference is the drive displacement
+    Y = p["z1"][2] * p["F"]
+    V_ac = dg.modulator.k_per_V * (u.real * p["carrier"] + 0.5 * ripple_feedback(dg, w, p["V_ps"]) * np.conj(p["carrier"]))
     sp = dg.sense_pickoff
     V_s = dg.sense_amps_response(w) * (sp.gain_V_per_m * Y + sp.c_feedthrough_F / sp.c_feedback_F * V_ac)
     k_out = dg.output_lpf.gain
-    rate_V = k_out * dg.demodulator.baseband(V_s, R_I)
-    quad_V = k_out * dg.demodulator.baseband(V_s, R_Q)
-    return SteadyState(omega_rad_s=w, f_Hz=w / (2 * np.pi), amplitude_m=A, v_ps_amplitude_V=vps_amp,
-                       agc_effort_V=float(u0), modulator_gain=float(g0), rate_V=float(rate_V),
-                       quadrature_V=float(quad_V), loop_phase_error_rad=loop_phase_error(dg),
-                       X=X, Y=complex(Y), V_s=complex(V_s), R_I=R_I, R_Q=R_Q)
+    rate_V = k_out * dg.demodulator.baseband(V_s, p["R_I"])
+    quad_V = k_out * dg.demodulator.baseband(V_s, p["R_Q"])
+    return SteadyState(omega_rad_s=w, f_Hz=w / (2 * np.pi), amplitude_m=A, v_ps_amplitude_V=abs(p["V_ps"]),
+                       agc_effort_V=float(u.real), modulator_gain=float(abs(p["V_ac"]) / abs(p["V_ps"])),
+                       rate_V=float(rate_V), quadrature_V=float(quad_V), loop_phase_error_rad=loop_phase_error(dg),
+                       X=X, Y=complex(Y), V_s=complex(V_s), R_I=p["R_I"], R_Q=p["R_Q"])
 
 
 def scale_factor_V_per_dps(dg: Diagram) -> float:

@@ -164,3 +164,29 @@ def noise_factor(A: np.ndarray, G: np.ndarray, Qc: np.ndarray, h: float) -> np.n
         Ls = r.T * np.where(np.diag(r) < 0, -1.0, 1.0)[None, :]
     L[np.ix_(R, R)] = d[:, None] * Ls
     return L
+
+
+def batched_factor(Q: np.ndarray, rel_jitter: float = 1e-10) -> np.ndarray:
+    """Lower-triangular factors of a stack of covariances ``Q[k]`` (balanced, jittered Cholesky).
+
+    Each covariance is scaled by its own standard deviations, given a relative jitter
+    (a covariance error of ``rel_jitter``) and factored; states without noise get zero rows.
+
+    Parameters
+    ----------
+    Q : ndarray, shape (k, n, n)
+    rel_jitter : float, optional
+
+    Returns
+    -------
+    ndarray, shape (k, n, n)
+    """
+    Q = 0.5 * (Q + np.swapaxes(Q, 1, 2))
+    d = np.sqrt(np.clip(np.einsum("kii->ki", Q), 0.0, None))
+    on = d > 0
+    safe = np.where(on, d, 1.0)
+    Qn = Q / (safe[:, :, None] * safe[:, None, :])
+    Qn = np.where(on[:, :, None] & on[:, None, :], Qn, 0.0)
+    n = Q.shape[1]
+    Lc = np.linalg.cholesky(Qn + (rel_jitter + np.where(on, 0.0, 1.0))[:, :, None] * np.eye(n)[None])
+    return np.where(on[:, :, None], d[:, :, None] * Lc, 0.0)

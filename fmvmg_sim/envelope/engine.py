@@ -21,7 +21,8 @@ from ..compiled import load_rollout
 from ..diagram import build_diagram
 from ..result import SimResult
 from ..scenario import Scenario
-from .model import PARAMS, operating_params
+from ..carrier.discretize import batched_factor
+from .model import IA, IS1, PARAMS, N, operating_params
 from .step import ENVELOPE_MODEL, N_IN, STATE
 
 #: Spacing of the temperature grid on which the averaged model is discretised (K).
@@ -42,19 +43,26 @@ class _ParamTable:
             n = max(4, int(np.ceil((t_hi - t_lo) / T_GRID_K)) + 3)
             grid = np.linspace(t_lo - T_GRID_K, t_hi + T_GRID_K, n)
         self.grid = grid
-        rows, self.extra = [], []
+        rows, covs, self.extra = [], [], []
         for T in grid:
             op = operating_params(build_diagram(device, float(T)), h_s, noise_on)
             rows.append(PARAMS.pack(op))
+            covs.append(op["Q"])
             self.extra.append(op)
         self.table = np.array(rows)
+        self.cov = np.array(covs)
         self.spline = CubicSpline(grid, self.table, axis=0) if len(grid) > 1 else None
+        self.cov_spline = CubicSpline(grid, self.cov, axis=0) if len(grid) > 1 else None
 
     def __call__(self, T: np.ndarray) -> np.ndarray:
+        """Packed parameters at each temperature; the noise factor is taken from the interpolated covariance
+        (covariances are smooth in T, their triangular factors need not be)."""
         T = np.atleast_1d(T)
         if self.spline is None:
             return np.repeat(self.table, len(T), axis=0)
-        return self.spline(T)
+        P = self.spline(T)
+        P[:, PARAMS.slices["L"]] = batched_factor(self.cov_spline(T)).reshape(len(T), -1)
+        return P
 
 
 def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimResult:
@@ -139,7 +147,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
         quadrature_V=quad_V, drive_amplitude_V=get("amp_V")[:, 0], agc_effort_V=get("agc_V")[:, 0],
         drive_frequency_Hz=get("freq_Hz")[:, 0],
     )
-    internal = dict(drive_displacement_amplitude_m=get("d")[:, 0])
+    internal = dict(drive_displacement_amplitude_m=get("x")[:, 0])
     wall = time.perf_counter() - wall0
     info = dict(engine="envelope", step_s=h, steps_per_output=Mo, output_interval_s=dt_out,
                 nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,
@@ -155,15 +163,13 @@ def _initial(scn: Scenario, tab: _ParamTable, T0: float) -> np.ndarray:
     k = int(np.argmin(np.abs(tab.grid - T0)))
     op = tab.extra[k]
     ss = op["steady"]
-    x = dict(d=np.zeros(4), jd=0.0, s=np.zeros(6), js=np.zeros(2), u=0.0, w_rate=np.deg2rad(float(scn.rate(0.0))),
-             vref_f=float(scn.vref_factor(0.0)), acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0,
-             agc_V=0.0, freq_Hz=ss.f_Hz)
+    x = dict(x=np.zeros(N), u=0.0, w_rate=np.deg2rad(float(scn.rate(0.0))), vref_f=float(scn.vref_factor(0.0)),
+             acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0, agc_V=0.0, freq_Hz=ss.f_Hz)
     if scn.settings["initial"]["state"] == "steady":
-        x["d"] = np.array([ss.amplitude_m, op["vref0"] * x["vref_f"], 0.0,
-                           ss.agc_effort_V / op["ki"] if op["ki"] > 0 else 0.0])
-        x["s"] = op["sense_steady"][:6]
+        x["x"] = op["x_steady"].copy()
+        x["x"][IS1] = op["vref0"] * x["vref_f"]
         x["u"] = ss.agc_effort_V
         x["rate_V"], x["quad_V"] = ss.rate_V, ss.quadrature_V
     else:
-        x["d"][0] = scn.settings["initial"]["drive_displacement_m"]
+        x["x"][IA] = scn.settings["initial"]["drive_displacement_m"]
     return STATE.pack(x)
