@@ -42,6 +42,9 @@ class PiecewiseProfile:
         float or ndarray
         """
         t = np.asarray(t_s, dtype=float)
+        if not self.sines and np.all(self.values == self.values[0]):  # constant: the common case of long runs
+            out = np.full(t.shape, float(self.values[0]))
+            return out if out.ndim else float(out)
         # right-continuous steps: use the last breakpoint at or before t
         idx = np.searchsorted(self.times_s, t, side="right") - 1
         idx = np.clip(idx, 0, len(self.times_s) - 1)

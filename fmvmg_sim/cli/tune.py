@@ -1,0 +1,180 @@
+"""``fmvmg tune [SCENARIO.toml]``: PI gains of the drive amplitude loop, robust over temperature, checked in simulation.
+
+Thin front end of :mod:`fmvmg_sim.tuning.report` (robust gains, table, plots) and
+:mod:`fmvmg_sim.tuning.sweep` (``--sweep`` on Dask). Bad arguments raise
+:class:`fmvmg_sim.errors.InputError` naming the option (exit code 2).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent.parent / "scenarios" / "startup.toml"
+
+
+def register(sub) -> None:
+    """Add the ``tune`` sub-command.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+    """
+    p = sub.add_parser("tune", help="PI gains of the drive amplitude loop (robust over temperature)", description=(
+        "Linearise the AGC loop of the scenario's device at each temperature, choose PI gains that minimise the "
+        "worst-case settling time over -40..85 C and a Q_d tolerance (CasADi/IPOPT) subject to phase margin, gain "
+        "margin, overshoot and PI output limits, and check them with the carrier engine (10 %% Vref step and "
+        "start-up). Prints a table (stdout), writes DIR/tune.json and Bode/step/start-up plots. With --sweep: a "
+        "grid of gains and temperatures on Dask instead (DIR/sweep.csv, sweep.json, sweep_heatmap.png)."))
+    p.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO),
+                   help="scenario TOML whose device (and circuit overrides) to tune (default: scenarios/startup.toml)")
+    p.add_argument("-o", "--out", default=None, help="output folder (default: out/tune)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any scenario value, e.g. --set device.mechanics.q_drive=3e4 (repeatable)")
+    p.add_argument("--json", action="store_true", help="print the report as one JSON object on stdout")
+    p.add_argument("--no-sim", action="store_true", help="skip the carrier-engine checks (linear model only)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--gains", nargs=2, type=float, metavar=("KP", "KI"), default=None,
+                   help="check these gains instead of running the robust optimisation")
+    p.add_argument("--temperatures", nargs="+", type=float, metavar="C", default=None,
+                   help="temperatures of the table and the simulation checks (default -40 25 85)")
+    p.add_argument("--grid-points", type=int, default=6,
+                   help="temperatures in the robust problem's grid over -40..85 C (default 6)")
+    p.add_argument("--q-tolerance", type=float, default=0.2, help="relative Q_d tolerance (default 0.2 = +-20 %%)")
+    g = p.add_argument_group("gain sweep (Dask)")
+    g.add_argument("--sweep", action="store_true", help="evaluate a grid of Kp, Ki and temperatures on Dask")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="address of an existing Dask scheduler (default: start a LocalCluster)")
+    g.add_argument("--workers", type=int, default=2, help="LocalCluster workers, 1 thread each (default 2)")
+    g.add_argument("--sweep-sim", action="store_true", help="add a short carrier-engine step check to every task")
+    g.add_argument("--kp-grid", nargs=3, type=float, metavar=("LO", "HI", "N"), default=[20.0, 200.0, 10],
+                   help="Kp values: N points from LO to HI (default 20 200 10)")
+    g.add_argument("--ki-grid", nargs=3, type=float, metavar=("LO", "HI", "N"), default=[100.0, 1500.0, 8],
+                   help="Ki values (1/s): N points from LO to HI (default 100 1500 8)")
+    p.add_argument("--no-progress", action="store_true", help="no progress messages on stderr")
+    p.set_defaults(func=main)
+
+
+def _grid(values, name):
+    import numpy as np
+    from ..errors import InputError
+    lo, hi, n = values
+    if not (n >= 1 and float(n).is_integer()):
+        raise InputError(f"N must be a positive integer, got {n:g}", name)
+    if not (0 <= lo <= hi) or (n > 1 and lo == hi):
+        raise InputError(f"expected 0 <= LO < HI, got LO={lo:g} HI={hi:g}", name)
+    return [float(v) for v in np.linspace(lo, hi, int(n))]
+
+
+def _check_args(args):
+    from ..errors import InputError
+    if args.gains is not None and (not args.gains[0] > 0 or not args.gains[1] >= 0):
+        raise InputError(f"expected Kp > 0 and Ki >= 0, got {args.gains}", "--gains")
+    if not 0 <= args.q_tolerance < 0.9:
+        raise InputError(f"expected 0 <= tolerance < 0.9, got {args.q_tolerance:g}", "--q-tolerance")
+    if args.grid_points < 1:
+        raise InputError(f"expected at least 1, got {args.grid_points}", "--grid-points")
+    if args.workers < 1:
+        raise InputError(f"expected at least 1, got {args.workers}", "--workers")
+    for t in args.temperatures or []:
+        if not -100.0 <= t <= 200.0:
+            raise InputError(f"temperature {t:g} C outside -100..200 C", "--temperatures")
+
+
+def main(args) -> int:
+    """Run the sub-command.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+
+    Returns
+    -------
+    int
+        Exit code.
+    """
+    import numpy as np
+
+    from ..record import atomic_write_text
+    from ..scenario import load_scenario
+    from ..tuning.report import CHECK_TEMPERATURES_C, build_report, format_table
+    from ..tuning.robust import RobustSpec
+
+    _check_args(args)
+    log = (lambda m: None) if args.no_progress else (lambda m: sys.stderr.write(f"fmvmg tune: {m}\n"))
+    scn = load_scenario(args.scenario, args.overrides)
+    device = scn.device
+    out = Path(args.out) if args.out else Path("out") / "tune"
+    temps = args.temperatures or list(CHECK_TEMPERATURES_C)
+    if args.sweep:
+        return _sweep(args, device, out, temps, log)
+    qt = args.q_tolerance
+    spec = RobustSpec(temperatures_C=tuple(np.linspace(-40.0, 85.0, args.grid_points)),
+                      q_factors=(1.0 - qt, 1.0, 1.0 + qt) if qt > 0 else (1.0,))
+    report = build_report(device, temps, spec, given=args.gains, simulate=not args.no_sim, log=log)
+    out.mkdir(parents=True, exist_ok=True)
+    data = _clean(report.as_dict())
+    data["scenario"] = str(args.scenario)
+    atomic_write_text(out / "tune.json", json.dumps(data, indent=2) + "\n")
+    if not args.no_plots:
+        from ..tuning.plots import plot_bode, plot_startups, plot_steps
+        plot_bode(report.loops(device), out / "bode.png")
+        tuned = report.tuned
+        if report.steps:
+            plot_steps(report.steps[tuned], out / "step.png")
+        else:
+            plot_steps([], out / "step.png", predicted_only=report.metrics[tuned])
+        if report.startups:
+            plot_startups(report.startups, out / "startup.png")
+    if args.json:
+        sys.stdout.write(json.dumps(data) + "\n")
+    else:
+        sys.stdout.write(format_table(report) + "\n")
+        sys.stdout.write(f"wrote {out}/tune.json" + ("" if args.no_plots else " and plots") + "\n")
+    return 0
+
+
+def _sweep(args, device, out, temps, log) -> int:
+    from ..record import atomic_write_text
+    from ..tuning.sweep import run_sweep
+    kps = _grid(args.kp_grid, "--kp-grid")
+    kis = _grid(args.ki_grid, "--ki-grid")
+    res = run_sweep(device, kps, kis, temps, simulate=args.sweep_sim, scheduler=args.scheduler,
+                    n_workers=args.workers, log=log)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "sweep.csv", res.to_csv())
+    data = _clean(res.as_dict())
+    atomic_write_text(out / "sweep.json", json.dumps(data, indent=2) + "\n")
+    if not args.no_plots:
+        from ..tuning.linear_loop import diagram_at, pole_zero_rule
+        from ..tuning.plots import plot_sweep_heatmap
+        pi = device.values["circuit"]["pi"]
+        marks = {"pole-zero rule": pole_zero_rule(diagram_at(device, device.reference_temperature_C)),
+                 "current": (pi["kp"], pi["ki_per_s"])}
+        if args.gains:
+            marks["given"] = tuple(args.gains)
+        plot_sweep_heatmap(res, out / "sweep_heatmap.png", marks)
+    best = res.best()
+    if args.json:
+        sys.stdout.write(json.dumps(data) + "\n")
+    else:
+        sys.stdout.write(f"sweep: {len(res.rows)} points on {res.cluster}; best feasible: "
+                         + (f"Kp={best['kp']:.4g} Ki={best['ki_per_s']:.4g}, worst-case settling "
+                            f"{best['worst_settling_time_s'] * 1e3:.2f} ms" if best else "none") + "\n")
+        sys.stdout.write(f"wrote {out}/sweep.csv, sweep.json" + ("" if args.no_plots else ", sweep_heatmap.png") + "\n")
+    return 0
+
+
+def _clean(obj):
+    """NaN/inf to None and numpy scalars to Python so the JSON is strict."""
+    import math
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
