@@ -96,7 +96,7 @@ def carrier_phasors(dg: Diagram, V_x: complex, V_ps: complex) -> tuple[complex, 
     return carrier, ref_i, ref_q
 
 
-def drive_response(dg: Diagram, omega: float, rate_rad_s: float = 0.0) -> np.ndarray:
+def drive_response(dg: Diagram, omega: float, rate_rad_s: float = 0.0, k_extra_N_per_m: float = 0.0) -> np.ndarray:
     """Resonator state phasors (x, x', y, y') per newton of drive force at ``omega``.
 
     The full two-mode model, so the sense mode's back-action on the drive (through the
@@ -108,13 +108,15 @@ def drive_response(dg: Diagram, omega: float, rate_rad_s: float = 0.0) -> np.nda
     dg : Diagram
     omega : float
     rate_rad_s : float, optional
+    k_extra_N_per_m : float, optional
+        Extra drive stiffness (the Duffing term's describing function at the amplitude).
 
     Returns
     -------
     ndarray of complex, shape (4,)
     """
     r = dg.resonator
-    M = 1j * omega * np.eye(4) - r.state_matrix(rate_rad_s)
+    M = 1j * omega * np.eye(4) - r.state_matrix(rate_rad_s, k_extra_N_per_m)
     return np.linalg.solve(M, np.array([0, 1 / r.m_drive_kg, 0, 0], dtype=complex))
 
 
@@ -187,7 +189,7 @@ def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float):
     Hx = dg.drive_chain_response(omega)
     V_x, V_ps = Hx * A, Hx * dg.phase_shifter_response(omega) * A
     carrier, R_I, R_Q = carrier_phasors(dg, V_x, V_ps)
-    z1 = drive_response(dg, omega, rate_rad_s)
+    z1 = drive_response(dg, omega, rate_rad_s, dg.resonator.duffing_stiffness(A))
     F = A / z1[0]
     V_ac = F / dg.comb_drive.linear_coef_N_per_V
     U2 = ripple_feedback(dg, omega, V_ps)

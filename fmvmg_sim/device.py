@@ -32,12 +32,14 @@ DEVICE_SCHEMA = {
         "q_drive": Num(1.0, 1e9), "q_sense": Num(1.0, 1e9),
         "quadrature_rate_dps": Num(-1e5, 1e5), "damping_coupling_rate_dps": Num(-1e4, 1e4),
         "k_electrostatic_sense_N_per_m": Num(), "duffing_k3_drive_N_per_m3": Num(),
+        "duffing_k3_rel": Num(-0.1, 0.1),
     },
     "thermal": {
         "tcf_linear_per_K": Num(-1e-3, 1e-3), "tcf_quadratic_per_K2": Num(-1e-5, 1e-5),
         "split_tcf_per_K": Num(-1e-4, 1e-4), "q_ted": Num(positive=True),
         "q_anchor": Num(positive=True), "q_gas_exponent": Num(-10, 10),
         "quadrature_tc_per_K": Num(-0.1, 0.1),
+        "q_extra_tc_per_K": Num(-0.1, 0.1), "split_extra_Hz_per_K": Num(-10, 10),
     },
     "circuit": {
         "drive_pickoff": {"bias_V": Num(positive=True), "dC_dx_F_per_m": Num(positive=True),
@@ -55,9 +57,10 @@ DEVICE_SCHEMA = {
                        "topology": Choice(("push-pull", "single-sided")), "asymmetry": Num(-1, 1)},
         "sense_pickoff": {"bias_V": Num(positive=True), "dC_dx_F_per_m": Num(positive=True),
                           "c_feedback_F": Num(positive=True), "c_feedthrough_F": Num(lo=0),
-                          "sign": Num(-1, 1)},
+                          "sign": Num(-1, 1), "c_feedthrough_tc_per_K": Num(-0.1, 0.1)},
         "sense_amp1": _AMP, "sense_amp2": _AMP,
-        "demodulator": {"k_per_V": Num(positive=True), "phase_trim": Num(-3.2, 3.2, allow=("auto",))},
+        "demodulator": {"k_per_V": Num(positive=True), "phase_trim": Num(-3.2, 3.2, allow=("auto",)),
+                        "phase_tc_rad_per_K": Num(-0.1, 0.1)},
         "output_lpf": {"f_c_Hz": Num(positive=True), "gain": Num()},
     },
     "noise": {
@@ -66,6 +69,10 @@ DEVICE_SCHEMA = {
         "rate_random_walk_dps_per_sqrt_s": Num(lo=0), "quantization_lsb_V": Num(lo=0),
     },
 }
+
+#: Keys a device file may leave out (they default to zero: the unmodelled effects switch them on).
+OPTIONAL_KEYS = {"mechanics.duffing_k3_rel", "thermal.q_extra_tc_per_K", "thermal.split_extra_Hz_per_K",
+                 "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K"}
 
 DEVICES_DIR = Path(__file__).resolve().parent.parent / "scenarios" / "devices"
 
@@ -152,20 +159,22 @@ class Device:
         dT = float(temperature_C) - T0
         f_d = law.frequency_Hz(me["f_drive_Hz"], dT, th["tcf_linear_per_K"], th["tcf_quadratic_per_K2"])
         f_s_mech = (law.frequency_Hz(me["f_sense_Hz"], dT, th["tcf_linear_per_K"], th["tcf_quadratic_per_K2"])
-                    + me["f_drive_Hz"] * th["split_tcf_per_K"] * dT)
+                    + me["f_drive_Hz"] * th["split_tcf_per_K"] * dT + th.get("split_extra_Hz_per_K", 0.0) * dT)
         k_s = me["m_sense_kg"] * (2 * np.pi * f_s_mech) ** 2 + me["k_electrostatic_sense_N_per_m"]
         if k_s <= 0:
             raise ValueError("electrostatic softening exceeds the sense stiffness")
         f_s = np.sqrt(k_s / me["m_sense_kg"]) / (2 * np.pi)
         q = {m: float(law.quality_factor(me[f"q_{m}"], temperature_C, T0, th["q_ted"], th["q_anchor"],
-                                         th["q_gas_exponent"])) for m in ("drive", "sense")}
+                                         th["q_gas_exponent"])) * (1 + th.get("q_extra_tc_per_K", 0.0) * dT)
+             for m in ("drive", "sense")}
         omega_q = np.deg2rad(me["quadrature_rate_dps"]) * (1 + th["quadrature_tc_per_K"] * dT)
         k_q = 2 * me["m_coriolis_kg"] * 2 * np.pi * f_d * omega_q
         c_q = 2 * me["m_coriolis_kg"] * np.deg2rad(me["damping_coupling_rate_dps"]) * (me["q_sense"] / q["sense"])
         mech = dict(m_drive_kg=me["m_drive_kg"], m_sense_kg=me["m_sense_kg"], m_coriolis_kg=me["m_coriolis_kg"],
                     f_drive_Hz=float(f_d), f_sense_Hz=float(f_s), q_drive=q["drive"], q_sense=q["sense"],
                     k_quad_N_per_m=float(k_q), c_quad_N_s_per_m=float(c_q),
-                    k3_drive_N_per_m3=me["duffing_k3_drive_N_per_m3"], temperature_K=temperature_C + law.KELVIN)
+                    k3_drive_N_per_m3=me["duffing_k3_drive_N_per_m3"] + self._k3_from_rel(),
+                    temperature_K=temperature_C + law.KELVIN)
 
         def amp(d):
             return dict(gain=law.linear_tc(d["gain"], dT, d["gain_tc_per_K"]),
@@ -183,14 +192,41 @@ class Device:
             "pi": dict(ci["pi"]),
             "modulator": dict(ci["modulator"]),
             "comb_drive": dict(ci["comb_drive"]),
-            "sense_pickoff": dict(ci["sense_pickoff"]),
+            "sense_pickoff": _feedthrough_at(ci["sense_pickoff"], dT),
             "sense_amp1": amp(ci["sense_amp1"]),
             "sense_amp2": amp(ci["sense_amp2"]),
-            "demodulator": dict(ci["demodulator"]),
+            "demodulator": {k: val for k, val in ci["demodulator"].items() if k != "phase_tc_rad_per_K"},
             "output_lpf": dict(ci["output_lpf"]),
         }
-        return OperatingPoint(float(temperature_C), {"mechanics": mech, "circuit": circ,
-                                                     "noise": dict(v["noise"]), "delta_T_K": dT})
+        return OperatingPoint(float(temperature_C), {
+            "mechanics": mech, "circuit": circ, "noise": dict(v["noise"]), "delta_T_K": dT,
+            "demod_phase_drift_rad": ci["demodulator"].get("phase_tc_rad_per_K", 0.0) * dT})
+
+    def nominal_amplitude_m(self) -> float:
+        """Drive amplitude the AGC holds at the reference temperature, ``(pi/2) Vref / (G_r K_dx)``.
+
+        Returns
+        -------
+        float
+        """
+        ci = self.values["circuit"]
+        dp = ci["drive_pickoff"]
+        k_dx = dp["bias_V"] * dp["dC_dx_F_per_m"] / dp["c_feedback_F"] * abs(ci["drive_amp"]["gain"])
+        return (np.pi / 2) * ci["reference"]["vref_V"] / (ci["rectifier"]["gain"] * k_dx)
+
+    def _k3_from_rel(self) -> float:
+        rel = self.values["mechanics"].get("duffing_k3_rel", 0.0)
+        if rel == 0.0:
+            return 0.0
+        me = self.values["mechanics"]
+        k_d = me["m_drive_kg"] * (2 * np.pi * me["f_drive_Hz"]) ** 2
+        return rel * k_d / self.nominal_amplitude_m() ** 2
+
+
+def _feedthrough_at(sp: dict, dT: float) -> dict:
+    out = {k: v for k, v in sp.items() if k != "c_feedthrough_tc_per_K"}
+    out["c_feedthrough_F"] = sp["c_feedthrough_F"] * (1 + sp.get("c_feedthrough_tc_per_K", 0.0) * dT)
+    return out
 
 
 def _merge(dst: dict, src: dict) -> None:
@@ -233,7 +269,7 @@ def load_device(path: str | Path) -> Device:
 def _missing(values: dict, schema: dict, prefix: str = "") -> list[str]:
     out = []
     for k, spec in schema.items():
-        if k in ("name", "description", "*"):
+        if k in ("name", "description", "*") or (prefix + k) in OPTIONAL_KEYS:
             continue
         if k not in values:
             out.append(prefix + k)

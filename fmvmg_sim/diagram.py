@@ -90,7 +90,8 @@ class Diagram:
         """Drive-mode natural angular frequency."""
         return 2 * np.pi * self.resonator.f_drive_Hz
 
-    def core_system(self, g: float, rate_rad_s: float = 0.0, k_drive_extra_N_per_m: float = 0.0) -> control.StateSpace:
+    def core_system(self, g: float, rate_rad_s: float = 0.0, k_drive_extra_N_per_m: float = 0.0,
+                    dk_quad_N_per_m: float = 0.0) -> control.StateSpace:
         """The linear core for modulator gain ``g`` (v_ac = g v_ps) and rate ``rate_rad_s``.
 
         Parameters
@@ -101,6 +102,8 @@ class Diagram:
             Input rate.
         k_drive_extra_N_per_m : float, optional
             Extra drive stiffness (Duffing describing function).
+        dk_quad_N_per_m : float, optional
+            Extra quadrature stiffness.
 
         Returns
         -------
@@ -109,6 +112,10 @@ class Diagram:
         """
         res = self.resonator.linear_model()
         A = self.resonator.state_matrix(rate_rad_s, k_drive_extra_N_per_m)
+        if dk_quad_N_per_m:
+            A = A.copy()
+            A[1, 2] -= dk_quad_N_per_m / self.resonator.m_drive_kg
+            A[3, 0] -= dk_quad_N_per_m / self.resonator.m_sense_kg
         res = control.ss(A, res.B, res.C, res.D, name="resonator", inputs=list(res.input_labels),
                          outputs=list(res.output_labels), states=list(res.state_labels))
         gain_blk = control.ss(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[g]], name="mod",
@@ -229,16 +236,22 @@ def design_phase_trim(device: Device) -> float:
     return _trim_for(device)
 
 
-def build_diagram(device: Device, temperature_C: float) -> Diagram:
+def build_diagram(device: Device, temperature_C: float, quad_delta_rel: float = 0.0) -> Diagram:
     """All blocks of ``device`` at ``temperature_C``.
 
     Parameters
     ----------
     device : Device
     temperature_C : float
+    quad_delta_rel : float, optional
+        Relative change of the quadrature stiffness (hysteresis, stress relaxation).
 
     Returns
     -------
     Diagram
     """
-    return Diagram(device.at(temperature_C), design_phase_trim(device))
+    op = device.at(temperature_C)
+    if quad_delta_rel:
+        op.values["mechanics"]["k_quad_N_per_m"] *= 1.0 + quad_delta_rel
+    # the reference phase is trimmed once, at the reference temperature; its drift follows the board
+    return Diagram(op, design_phase_trim(device) + op.values.get("demod_phase_drift_rad", 0.0))

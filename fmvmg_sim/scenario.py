@@ -80,7 +80,10 @@ class Scenario:
     vref_factor : PiecewiseProfile
         Multiplier of the amplitude set-point Vref against time (1 = nominal).
     effects : dict
-        The ``[effects]`` table (validated by :mod:`fmvmg_sim.effects`).
+        The ``[effects]`` table (validated by :mod:`fmvmg_sim.effects`); ``device`` already has
+        the temperature-law effects folded in.
+    device_nominal : Device
+        The device without the effects (its scale factor converts rate_V to rate_dps).
     """
 
     path: str
@@ -90,6 +93,11 @@ class Scenario:
     rate: PiecewiseProfile
     vref_factor: PiecewiseProfile
     effects: dict = field(default_factory=dict)
+    device_nominal: Device | None = None
+
+    def __post_init__(self) -> None:
+        if self.device_nominal is None:
+            self.device_nominal = self.device
 
     @property
     def name(self) -> str:
@@ -196,9 +204,11 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None,
         if extra:
             raise InputError(f"unknown key(s) {sorted(extra)}; expected {start}, segments or points",
                              f"{name}: {label}")
-    from .effects import validate_effects
+    from .effects import EffectSet, validate_effects
     effects = validate_effects(tree.get("effects", {}), f"{name}: effects")
-    return Scenario(name, settings, device, temp, rate, vref, effects)
+    nominal = device
+    device = EffectSet(effects).apply_to_device(device) if effects else device
+    return Scenario(name, settings, device, temp, rate, vref, effects, nominal)
 
 
 def _table(tree: dict, key: str, name: str) -> dict:

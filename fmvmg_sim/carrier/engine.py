@@ -17,6 +17,7 @@ from tqdm import tqdm
 from .. import noise as noisegen
 from ..averaged import scale_factor_V_per_dps
 from ..diagram import build_diagram
+from ..effects import EffectSet
 from ..result import SimResult
 from ..scenario import Scenario
 from ..compiled import load_rollout
@@ -63,8 +64,11 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     n = int(np.ceil(scn.duration_s / dt_out - 1e-9))
     t_end = (np.arange(n) + 1) * dt_out
     t_mid = t_end - dt_out / 2
-    temp = np.asarray(scn.temperature(t_mid), dtype=float)
-    rate_dps = np.asarray(scn.rate(t_mid), dtype=float)
+    case_mid = np.asarray(scn.temperature(t_mid), dtype=float)
+    fx = EffectSet(scn.effects)
+    temp = fx.die_temperature(t_mid, case_mid)
+    sig = fx.signals(t_mid, temp)
+    rate_dps = np.asarray(scn.rate(t_mid), dtype=float) + sig["rate_dps"]
     rate_end = np.asarray(scn.rate(t_end), dtype=float)
     vref_f = np.asarray(scn.vref_factor(t_mid), dtype=float)
     rng = np.random.default_rng(scn.seed)
@@ -72,7 +76,7 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     # slow noises at the output rate, drawn first so they do not depend on call sizes
     phase_flicker = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_phase_rad2"], rng)
                      if nz["flicker"] else np.zeros(n))
-    sf_nom = scale_factor_V_per_dps(ref)
+    sf_nom = scale_factor_V_per_dps(build_diagram(scn.device_nominal, dev.reference_temperature_C))
     out_flicker_V = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng) * sf_nom
                      if nz["flicker"] else np.zeros(n))
     rrw_V = (noisegen.random_walk(n, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"], rng)
@@ -109,7 +113,7 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
         for key in set(Tq):
             rows = np.array([i for i, q in enumerate(Tq) if q == key])
             ks = rows + k0
-            P[rows] = plans[key].params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], trim, vref_f[ks])
+            P[rows] = plans[key].params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], vref_f[ks], sig["quad_rel"][ks])
         # float32 draws: half the cost of float64, and far finer than any noise level here
         W = (rng.standard_normal(((k1 - k0) * M, N_NOISE), dtype=np.float32).astype(float) if any_noise
              else np.zeros(((k1 - k0) * M, N_NOISE)))
@@ -139,7 +143,9 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
         drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
         drive_frequency_Hz=freq,
     )
-    internal = dict(drive_displacement_amplitude_m=amp_m, modulator_norm=_state(X, "n")[:, 0])
+    t_end_die = fx.die_temperature(t_end, np.asarray(scn.temperature(t_end), dtype=float))
+    internal = dict(drive_displacement_amplitude_m=amp_m, modulator_norm=_state(X, "n")[:, 0],
+                    die_temperature_C=t_end_die)
     wall = time.perf_counter() - wall0
     info = dict(engine="carrier", steps_per_cycle=spc, step_s=h, steps_per_sample=M, output_interval_s=dt_out,
                 nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,

@@ -36,6 +36,9 @@ class OperatingPlan:
 
     base: dict
     phi_rate: np.ndarray
+    phi_quad: np.ndarray
+    k_quad_N_per_m: float
+    trim_rad: float
     scale: np.ndarray
     steady: SteadyState
     C_x: np.ndarray
@@ -43,7 +46,7 @@ class OperatingPlan:
     A_core: np.ndarray
     _packed: np.ndarray | None = None
 
-    def params(self, rate_rad_s=0.0, phase_offset_rad=0.0, trim_rad: float = 0.0, vref_factor=1.0) -> np.ndarray:
+    def params(self, rate_rad_s=0.0, phase_offset_rad=0.0, vref_factor=1.0, quad_rel=0.0) -> np.ndarray:
         """Packed parameter vectors, one row per output sample (vectorised over the arguments).
 
         Parameters
@@ -51,23 +54,26 @@ class OperatingPlan:
         rate_rad_s : float or ndarray, optional
             Input rate.
         phase_offset_rad : float or ndarray, optional
-            Extra demodulation-reference phase (flicker, drift effects).
-        trim_rad : float, optional
-            The designed phase trim.
+            Extra demodulation-reference phase (flicker), on top of the trimmed reference phase.
         vref_factor : float or ndarray, optional
             Multiplier of the amplitude set-point.
+        quad_rel : float or ndarray, optional
+            Relative change of the quadrature stiffness (hysteresis, relaxation effects).
 
         Returns
         -------
         ndarray, shape (k, n_p)
         """
         rate = np.atleast_1d(np.asarray(rate_rad_s, dtype=float))
-        k = max(rate.size, np.size(phase_offset_rad), np.size(vref_factor))
+        k = max(rate.size, np.size(phase_offset_rad), np.size(vref_factor), np.size(quad_rel))
         if self._packed is None:
             self._packed = PARAMS.pack(self.base)
         P = np.repeat(self._packed[None, :], k, axis=0)
         P[:, PARAMS.slices["Phi"]] += np.broadcast_to(rate, (k,))[:, None] * self.phi_rate.ravel()[None, :]
-        ph = trim_rad + np.broadcast_to(np.asarray(phase_offset_rad, dtype=float), (k,))
+        dq = self.k_quad_N_per_m * np.broadcast_to(np.asarray(quad_rel, dtype=float), (k,))
+        if np.any(dq):
+            P[:, PARAMS.slices["Phi"]] += dq[:, None] * self.phi_quad.ravel()[None, :]
+        ph = self.trim_rad + np.broadcast_to(np.asarray(phase_offset_rad, dtype=float), (k,))
         P[:, PARAMS.slices["cos_ref"]] = np.cos(ph)[:, None]
         P[:, PARAMS.slices["sin_ref"]] = np.sin(ph)[:, None]
         P[:, PARAMS.slices["vref"]] = self.base["vref"] * np.broadcast_to(np.asarray(vref_factor, dtype=float), (k,))[:, None]
@@ -95,14 +101,17 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
     noise_on = {"brownian": True, "electronic": True, **(noise_on or {})}
     ss = steady_state(dg)
     g0 = ss.modulator_gain
-    core0 = dg.core_system(g0)
-    core_g = dg.core_system(g0 + 1.0)
-    core_w = dg.core_system(g0, 1.0)
+    kx = dg.resonator.duffing_stiffness(ss.amplitude_m)  # Duffing: describing-function stiffness at the amplitude
+    core0 = dg.core_system(g0, 0.0, kx)
+    core_g = dg.core_system(g0 + 1.0, 0.0, kx)
+    core_w = dg.core_system(g0, 1.0, kx)
+    core_q = dg.core_system(g0, 0.0, kx, 1.0)
     S = dg.core_state_scale() if scale is None else np.asarray(scale, dtype=float)
     Sinv = 1.0 / S
     A0 = Sinv[:, None] * np.asarray(core0.A) * S[None, :]
     Ag = Sinv[:, None] * (np.asarray(core_g.A) - np.asarray(core0.A)) * S[None, :]
     Aw = Sinv[:, None] * (np.asarray(core_w.A) - np.asarray(core0.A)) * S[None, :]
+    Aq = Sinv[:, None] * (np.asarray(core_q.A) - np.asarray(core0.A)) * S[None, :]
     B = Sinv[:, None] * np.asarray(core0.B)
     C = np.asarray(core0.C) * S[None, :]
     D = np.asarray(core0.D)
@@ -111,6 +120,7 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
     Phi, Gam = zoh(A0, B, h_s)
     Phi_g = expm_derivative(A0, Ag, h_s)
     Phi_w = expm_derivative(A0, Aw, h_s)
+    Phi_q = expm_derivative(A0, Aq, h_s)
     # noise standard deviations per step (one-sided PSD S -> variance S / (2 h))
     psd_fx, psd_fy = dg.resonator.brownian_force_psd_N2_per_Hz()
     nz = dg.noise
@@ -137,7 +147,8 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
         vdc2=dg.comb_drive.vdc_V ** 2, cos_ref=1.0, sin_ref=0.0, k_demod=dg.demodulator.k_per_V,
         Phi_out=Phi_out, Gam_out=Gam_out[:, 0], h=h_s,
     )
-    return OperatingPlan(base=base, phi_rate=Phi_w, scale=S, steady=ss,
+    return OperatingPlan(base=base, phi_rate=Phi_w, phi_quad=Phi_q, k_quad_N_per_m=dg.resonator.k_quad_N_per_m,
+                         trim_rad=dg.phase_trim_rad, scale=S, steady=ss,
                          C_x=C[idx["x"]], C_y=C[idx["y"]], A_core=A0)
 
 

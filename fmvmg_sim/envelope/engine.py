@@ -19,6 +19,7 @@ from .. import noise as noisegen
 from ..averaged import scale_factor_V_per_dps
 from ..compiled import load_rollout
 from ..diagram import build_diagram
+from ..effects import EffectSet
 from ..result import SimResult
 from ..scenario import Scenario
 from ..carrier.discretize import batched_factor
@@ -93,8 +94,13 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     t_out = (np.arange(n_out_pad) + 1) * dt_out
     t_step = (np.arange(n_out_pad * Mo) + 1) * h
     t_blk = (np.arange(K) + 0.5) * nob * dt_out
-    temp_blk = np.asarray(scn.temperature(t_blk), dtype=float)
-    temp_all = np.asarray(scn.temperature(t_out), dtype=float)
+    fx = EffectSet(scn.effects)
+    # die temperature (thermal lag) on a fine grid, then at the blocks
+    t_fine = np.linspace(0.0, t_out[-1], max(2, min(len(t_out), 200000)))
+    die_fine = fx.die_temperature(t_fine, np.asarray(scn.temperature(t_fine), dtype=float))
+    temp_blk = np.interp(t_blk, t_fine, die_fine)
+    temp_all = np.interp(t_out, t_fine, die_fine)
+    sig_fine = fx.signals(t_fine, die_fine)
     nz = scn.noise
     noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
     tab = _ParamTable(dev, h, noise_on, float(min(temp_blk.min(), temp_all.min())),
@@ -104,13 +110,13 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     n_steps = len(t_step)
     phase = (noisegen.flicker(n_steps, 1.0 / h, dev.values["noise"]["flicker_phase_rad2"], rng)
              if nz["flicker"] else np.zeros(n_steps))
-    ref = build_diagram(dev, dev.reference_temperature_C)
-    sf_nom = scale_factor_V_per_dps(ref)
+    sf_nom = scale_factor_V_per_dps(build_diagram(scn.device_nominal, dev.reference_temperature_C))
     out_flicker_V = (noisegen.flicker(n_out_pad, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng)
                      * sf_nom if nz["flicker"] else np.zeros(n_out_pad))
     rrw_V = (noisegen.random_walk(n_out_pad, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"],
                                   rng) * sf_nom if nz["rate_random_walk"] else np.zeros(n_out_pad))
-    rate_step = np.deg2rad(np.asarray(scn.rate(t_step), dtype=float))
+    rate_step = np.deg2rad(np.asarray(scn.rate(t_step), dtype=float) + np.interp(t_step, t_fine, sig_fine["rate_dps"]))
+    quad_step = np.interp(t_step, t_fine, sig_fine["quad_rel"])
     fac_step = np.asarray(scn.vref_factor(t_step), dtype=float)
     x = _initial(scn, tab, temp_blk[0])
     roll = load_rollout(ENVELOPE_MODEL, log)
@@ -125,12 +131,13 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
         k1 = min(K, k0 + blocks_per_call)
         s0, s1 = k0 * steps_blk, k1 * steps_blk
         W = np.empty((s1 - s0, N_IN))
-        nn = N_IN - 3
+        nn = N_IN - 4
         # float32 draws: half the cost of float64, and far finer than any noise level here
         W[:, :nn] = rng.standard_normal((s1 - s0, nn), dtype=np.float32) if any_noise else 0.0
         W[:, nn] = rate_step[s0:s1]
         W[:, nn + 1] = fac_step[s0:s1]
         W[:, nn + 2] = phase[s0:s1]
+        W[:, nn + 3] = quad_step[s0:s1]
         Xc = roll(x, P_all[k0:k1], W, Mo, nob)
         X[k0 * nob:k1 * nob] = Xc
         x = roll.continue_from(Xc[-1])
@@ -148,7 +155,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
         quadrature_V=quad_V, drive_amplitude_V=get("amp_V")[:, 0], agc_effort_V=get("agc_V")[:, 0],
         drive_frequency_Hz=get("freq_Hz")[:, 0],
     )
-    internal = dict(drive_displacement_amplitude_m=get("x")[:, 0])
+    internal = dict(drive_displacement_amplitude_m=get("x")[:, 0], die_temperature_C=temp_all[:n_out])
     wall = time.perf_counter() - wall0
     info = dict(engine="envelope", step_s=h, steps_per_output=Mo, output_interval_s=dt_out,
                 nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,
@@ -164,7 +171,7 @@ def _initial(scn: Scenario, tab: _ParamTable, T0: float) -> np.ndarray:
     k = int(np.argmin(np.abs(tab.grid - T0)))
     op = tab.extra[k]
     ss = op["steady"]
-    x = dict(x=np.zeros(N), u=0.0, w_rate=np.deg2rad(float(scn.rate(0.0))), vref_f=float(scn.vref_factor(0.0)),
+    x = dict(x=np.zeros(N), u=0.0, w_rate=np.deg2rad(float(scn.rate(0.0))), vref_f=float(scn.vref_factor(0.0)), dkq=0.0,
              acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0, agc_V=0.0, freq_Hz=ss.f_Hz)
     if scn.settings["initial"]["state"] == "steady":
         x["x"] = op["x_steady"].copy()

@@ -40,7 +40,7 @@ from ..errors import InputError
 
 N = 13
 IA, IS1, IS2, II, IJ, IYR, IYI, ISR, ISR2, ISI, ISI2, IJR, IJI = range(N)
-N_U = 4  # FOH inputs: [vref, W A, W Yr, W Yi]
+N_U = 7  # FOH inputs: [vref, W A, W Yr, W Yi, dkq A, dkq Yr, dkq Yi] (dkq: extra quadrature stiffness, N/m)
 N_NOISE = N
 
 PARAMS = Layout([
@@ -49,7 +49,7 @@ PARAMS = Layout([
     ("L", (N, N)),
     ("vref0", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
     ("R_I", (2,)), ("R_Q", (2,)), ("g_out", ()), ("h", ()),
-    ("omega", ()), ("b_u", ()), ("b_A", ()), ("b_Y", (2,)),
+    ("omega", ()), ("b_u", ()), ("b_A", ()), ("b_Y", (2,)), ("k_quad", ()),
 ])
 
 
@@ -86,7 +86,8 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
     C0, _, _ = carrier_phasors(dg, Hx * A0, Hx * Hps * A0)
     kc = dg.comb_drive.linear_coef_N_per_V * dg.modulator.k_per_V
     Dd = 2j * w * r.m_drive_kg + r.c_drive_N_s_per_m
-    Zd = r.k_drive_N_per_m - r.m_drive_kg * w ** 2 + 1j * w * r.c_drive_N_s_per_m
+    kx = r.duffing_stiffness(A0)  # Duffing: describing-function stiffness at the amplitude
+    Zd = r.k_drive_N_per_m + kx - r.m_drive_kg * w ** 2 + 1j * w * r.c_drive_N_s_per_m
     U2_per_A = ripple_feedback(dg, w, Hx * Hps * A0) / A0
     f2 = kc * 0.5 * U2_per_A * np.conj(C0)
     fu = kc * C0 / Dd                   # per unit u
@@ -127,6 +128,7 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
         bu[IA] = fu.real
         M[IA, IYR], M[IA, IYI] = _cmat(kap0)[0]
         Bu[IA, 2], Bu[IA, 3] = _cmat(kapW)[0]
+        Bu[IA, 5], Bu[IA, 6] = _cmat(-1.0 / Dd)[0]
         # amplitude estimate, integrator, its integral
         M[IS1:IS2 + 1, IA] = Bl * k_r
         M[IS1:IS2 + 1, IS1:IS2 + 1] = Al
@@ -139,6 +141,7 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
         M[IYR:IYI + 1, IYR:IYI + 1] = _cmat(aY)
         M[IYR:IYI + 1, IA] = [sA.real, sA.imag]
         Bu[IYR:IYI + 1, 1] = [sW.real, sW.imag]
+        Bu[IYR:IYI + 1, 4] = [(-1.0 / Ds).real, (-1.0 / Ds).imag]
         # sense chain and output LPF on Re/Im of V_s = kY Y + kU u + kU2 A
         for comp, (i1, i2) in enumerate(((ISR, ISR2), (ISI, ISI2))):
             KY = _cmat(kY)[comp]
@@ -182,7 +185,8 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
                 Gc_s=Gcu[:, 0], L=L, vref0=dg.vref_V, kp=kp, ki=ki, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
                 R_I=[ss.R_I.real, ss.R_I.imag], R_Q=[ss.R_Q.real, ss.R_Q.imag],
                 g_out=0.5 * dg.output_lpf.gain * dg.demodulator.k_per_V, h=h_s,
-                omega=w, b_u=fu.imag, b_A=fA.imag, b_Y=list(_cmat(kap0)[1]), steady=ss, x_steady=x_ss, Q=Q)
+                omega=w, b_u=fu.imag, b_A=fA.imag, b_Y=list(_cmat(kap0)[1]), k_quad=r.k_quad_N_per_m,
+                steady=ss, x_steady=x_ss, Q=Q)
 
 
 def _steady_state_vector(ss, aY, sA, kY, kU, kU2, ki) -> np.ndarray:

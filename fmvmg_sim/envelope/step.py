@@ -9,11 +9,12 @@ from ..compiled import StepModel
 from .model import IA, II, IJ, IJI, IJR, IS1, ISI, ISR, IYI, IYR, N, PARAMS
 
 STATE = Layout([
-    ("x", (N,)), ("u", ()), ("w_rate", ()), ("vref_f", ()),
+    ("x", (N,)), ("u", ()), ("w_rate", ()), ("vref_f", ()), ("dkq", ()),
     ("acc_t", ()), ("acc_u", ()), ("rate_V", ()), ("quad_V", ()), ("amp_V", ()), ("agc_V", ()), ("freq_Hz", ()),
 ])
-#: Per-step inputs: N standard normals, then rate (rad/s), set-point factor, reference phase (rad).
-N_IN = N + 3
+#: Per-step inputs: N standard normals, then rate (rad/s), set-point factor, reference phase (rad) and the
+#: relative quadrature-stiffness change.
+N_IN = N + 4
 #: Integrate-and-dump accumulators, zeroed after each output sample.
 RESET = ("acc_t", "acc_u")
 _J = (IJ, IJR, IJI)
@@ -46,7 +47,8 @@ def step(xs, p, w, ops=numpy_ops):
     x = [ops.if_else(first, 0.0, x[i]) if i in _J else x[i] for i in range(N)]
     noise = list(w[0:N])
     rate1, fac1, phi1 = w[N], w[N + 1], w[N + 2]
-    rate0, fac0 = S(xs, "w_rate"), S(xs, "vref_f")
+    dkq1 = w[N + 3] * P(p, "k_quad")
+    rate0, fac0, dkq0 = S(xs, "w_rate"), S(xs, "vref_f"), S(xs, "dkq")
     h = P(p, "h")
     vref0 = P(p, "vref0")
     v0, v1 = vref0 * fac0, vref0 * fac1
@@ -55,8 +57,8 @@ def step(xs, p, w, ops=numpy_ops):
     sat = (u_free > umax) + (u_free < umin)
     u_held = ops.fmin(ops.fmax(u_free, umin), umax)
     A, Yr, Yi = x[IA], x[IYR], x[IYI]
-    in0 = [v0, rate0 * A, rate0 * Yr, rate0 * Yi]
-    in1 = [v1, rate1 * A, rate1 * Yr, rate1 * Yi]
+    in0 = [v0, rate0 * A, rate0 * Yr, rate0 * Yi, dkq0 * A, dkq0 * Yr, dkq0 * Yi]
+    in1 = [v1, rate1 * A, rate1 * Yr, rate1 * Yi, dkq1 * A, dkq1 * Yr, dkq1 * Yi]
     ln = matvec(P(p, "L"), noise)
     a = matvec(P(p, "Phi"), x)
     b0 = matvec(P(p, "G0"), in0)
@@ -85,7 +87,7 @@ def step(xs, p, w, ops=numpy_ops):
     A1 = ops.fmax(x1[IA], 1e-15)
     bY = P(p, "b_Y")
     freq = (P(p, "omega") + (P(p, "b_u") * u1 + P(p, "b_A") * x1[IA] + bY[0] * x1[IYR] + bY[1] * x1[IYI]) / A1) / TWO_PI
-    return x1 + [u1, rate1, fac1, acc_t, acc_u, rate_V, quad_V, x1[IJ] * inv_t, acc_u * inv_t, freq]
+    return x1 + [u1, rate1, fac1, dkq1, acc_t, acc_u, rate_V, quad_V, x1[IJ] * inv_t, acc_u * inv_t, freq]
 
 
 ENVELOPE_MODEL = StepModel("fmvmg_envelope", STATE, PARAMS, N_IN, step, reset=RESET)
