@@ -251,6 +251,13 @@ def write_record(path: str | os.PathLike, record: Record) -> None:
 
     Known columns come first in contract order, then any others in their own order.
     Values are written with 12 significant digits; missing samples as ``nan``.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination file.
+    record : Record
+        The channels and metadata to write.
     """
     names = [c for c in RECORD_ORDER if c in record.columns]
     names += [c for c in record.columns if c not in names]
