@@ -114,10 +114,12 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
             rows = np.array([i for i, q in enumerate(Tq) if q == key])
             ks = rows + k0
             P[rows] = plans[key].params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], vref_f[ks], sig["quad_rel"][ks])
-        # float32 draws: half the cost of float64, and far finer than any noise level here
-        W = (rng.standard_normal(((k1 - k0) * M, N_NOISE), dtype=np.float32).astype(float) if any_noise
-             else np.zeros(((k1 - k0) * M, N_NOISE)))
-        Xc = roll(x, P, W, M)
+        if not any_noise:
+            Xc = roll(x, P, np.zeros(((k1 - k0) * M, N_NOISE)), M)
+        elif roll.draws_noise:  # the compiled code draws the normals (xoshiro256+ and a ziggurat)
+            Xc = roll(x, P, None, M, seed=int(rng.integers(2 ** 63)))
+        else:
+            Xc = roll(x, P, rng.standard_normal(((k1 - k0) * M, N_NOISE)), M)
         X[k0:k1] = Xc
         x = roll.continue_from(Xc[-1])
         bar.update(k1 - k0)
