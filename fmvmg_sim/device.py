@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import thermal_laws as law
+from .paths import scenarios_dir
 from .schema import Choice, Num, Text, validate_tree
 from .tomlio import load_toml
 
@@ -74,7 +75,7 @@ DEVICE_SCHEMA = {
 OPTIONAL_KEYS = {"mechanics.duffing_k3_rel", "thermal.q_extra_tc_per_K", "thermal.split_extra_Hz_per_K",
                  "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K"}
 
-DEVICES_DIR = Path(__file__).resolve().parent.parent / "scenarios" / "devices"
+DEVICES_DIR = scenarios_dir() / "devices"
 
 
 @dataclass

@@ -11,7 +11,9 @@ import json
 import sys
 from pathlib import Path
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent.parent / "scenarios" / "startup.toml"
+from ..paths import scenarios_dir
+
+DEFAULT_SCENARIO = scenarios_dir() / "startup.toml"
 
 
 def register(sub) -> None:

@@ -21,8 +21,9 @@ from ..device import Device
 from ..scenario import Scenario, load_scenario
 from .linear_loop import LoopMetrics, analyze_loop, diagram_at, step_metrics
 from .startup import averaged_startup
+from ..paths import scenarios_dir
 
-SCENARIOS_DIR = Path(__file__).resolve().parent.parent.parent / "scenarios"
+SCENARIOS_DIR = scenarios_dir()
 #: Template of the set-point step check.
 STEP_TEMPLATE = SCENARIOS_DIR / "tune_step.toml"
 #: Template of the start-up check.
