@@ -84,17 +84,15 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
     scale = ref.core_state_scale()
     plans: dict[float, object] = {}
+    keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K  # operating points, cached per 1 mK
 
-    def plan_key(T):
-        key = round(T / T_QUANTUM_K) * T_QUANTUM_K
+    def plan_for(key):
+        key = float(key)
         if key not in plans:
             plans[key] = make_plan(build_diagram(dev, key), h, noise_on, scale)
-        return key
+        return plans[key]
 
-    def plan_for(T):
-        return plans[plan_key(T)]
-
-    p0 = plan_for(temp[0])
+    p0 = plan_for(keys[0])
     x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
                       from_steady=scn.settings["initial"]["state"] == "steady")
     roll = load_rollout(CARRIER_MODEL, log)
@@ -109,11 +107,11 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     for k0 in range(0, n, per_call):
         k1 = min(n, k0 + per_call)
         P = np.empty((k1 - k0, STATE_P))
-        Tq = [plan_key(temp[k]) for k in range(k0, k1)]
-        for key in set(Tq):
-            rows = np.array([i for i, q in enumerate(Tq) if q == key])
+        uniq, inv = np.unique(keys[k0:k1], return_inverse=True)
+        for j, key in enumerate(uniq):
+            rows = np.flatnonzero(inv == j)
             ks = rows + k0
-            P[rows] = plans[key].params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], vref_f[ks], sig["quad_rel"][ks])
+            P[rows] = plan_for(key).params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], vref_f[ks], sig["quad_rel"][ks])
         if not any_noise:
             Xc = roll(x, P, np.zeros(((k1 - k0) * M, N_NOISE)), M)
         elif roll.draws_noise:  # the compiled code draws the normals (xoshiro256+ and a ziggurat)
