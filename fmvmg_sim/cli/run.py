@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from ..jsonout import strict
+
 
 def register(sub) -> None:
     """Add the ``run`` sub-command.
@@ -50,7 +52,7 @@ def main(args) -> int:
     res, summary = run_scenario(scn, progress=False if args.no_progress else None)
     out.mkdir(parents=True, exist_ok=True)
     write_record(out / "record.csv", res.to_record())
-    atomic_write_text(out / "summary.json", json.dumps(_clean(summary), indent=2) + "\n")
+    atomic_write_text(out / "summary.json", json.dumps(strict(summary), indent=2) + "\n")
     if not args.no_plots:
         from ..plots import plot_channels, plot_startup
         plot_startup(res, vref_profile_V(scn, res.time_s, res["temperature_C"]), out / "startup.png")
@@ -61,7 +63,7 @@ def main(args) -> int:
     for m in summary["messages"]:
         sys.stderr.write(f"fmvmg: {summary['status']}: {m}\n")
     if args.json:
-        sys.stdout.write(json.dumps(_clean(summary)) + "\n")
+        sys.stdout.write(json.dumps(strict(summary)) + "\n")
     else:
         s = summary
         sys.stderr.write(
@@ -70,17 +72,3 @@ def main(args) -> int:
             f"{s['agc_effort_V']:.4g} V, settled at {s['settling_time_s']:.3g} s; wrote {out}/record.csv "
             f"({s['simulated_time_s']:.3g} s simulated in {s['wall_time_s']:.2f} s)\n")
     return 0
-
-
-def _clean(obj):
-    """NaN/inf to None so the JSON is strict."""
-    import math
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if hasattr(obj, "item"):
-        return _clean(obj.item())
-    return obj

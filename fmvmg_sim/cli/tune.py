@@ -13,6 +13,8 @@ from pathlib import Path
 
 from ..paths import scenarios_dir
 
+from ..jsonout import strict
+
 DEFAULT_SCENARIO = scenarios_dir() / "startup.toml"
 
 
@@ -116,7 +118,7 @@ def main(args) -> int:
                       q_factors=(1.0 - qt, 1.0, 1.0 + qt) if qt > 0 else (1.0,))
     report = build_report(device, temps, spec, given=args.gains, simulate=not args.no_sim, log=log)
     out.mkdir(parents=True, exist_ok=True)
-    data = _clean(report.as_dict())
+    data = strict(report.as_dict())
     data["scenario"] = str(args.scenario)
     atomic_write_text(out / "tune.json", json.dumps(data, indent=2) + "\n")
     if not args.no_plots:
@@ -146,7 +148,7 @@ def _sweep(args, device, out, temps, log) -> int:
                     n_workers=args.workers, log=log)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "sweep.csv", res.to_csv())
-    data = _clean(res.as_dict())
+    data = strict(res.as_dict())
     atomic_write_text(out / "sweep.json", json.dumps(data, indent=2) + "\n")
     if not args.no_plots:
         from ..tuning.linear_loop import diagram_at, pole_zero_rule
@@ -166,17 +168,3 @@ def _sweep(args, device, out, temps, log) -> int:
                             f"{best['worst_settling_time_s'] * 1e3:.2f} ms" if best else "none") + "\n")
         sys.stdout.write(f"wrote {out}/sweep.csv, sweep.json" + ("" if args.no_plots else ", sweep_heatmap.png") + "\n")
     return 0
-
-
-def _clean(obj):
-    """NaN/inf to None and numpy scalars to Python so the JSON is strict."""
-    import math
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
