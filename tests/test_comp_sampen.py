@@ -47,3 +47,15 @@ def test_calibration_finds_separating_thresholds():
     nm, dm, acc = sampen.calibrate_thresholds(ent, lab)
     assert acc == 1.0
     assert 0.9 < nm <= 1.4 and 0.08 < dm <= 0.2
+
+
+def test_kdtree_sample_entropy_equals_antropy():
+    """antropy is the oracle (test-only): the same value to the last digit."""
+    import numpy as np
+    antropy = __import__("pytest").importorskip("antropy")
+    from fmvmg_sim.compensation.sampen import sampen_kdtree
+    rng = np.random.default_rng(11)
+    for x in (rng.standard_normal(3000), np.sin(np.arange(3000) * 0.063) + 0.05 * rng.standard_normal(3000)):
+        r = 0.2 * x.std()
+        assert sampen_kdtree(x, 2, r) == __import__("pytest").approx(antropy.sample_entropy(x, order=2, tolerance=r),
+                                                                      rel=1e-12)
