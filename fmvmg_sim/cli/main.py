@@ -16,7 +16,7 @@ import warnings
 from ..errors import InputError
 
 #: Sub-command modules, in the order ``--help`` lists them.
-SUBCOMMANDS = ("run", "allan", "tune", "compensate", "diagnose", "diagnose_benchmark", "import_bmi270")
+SUBCOMMANDS = ("run", "allan", "tune", "compensate", "compensate_eval", "diagnose", "diagnose_benchmark", "import_bmi270")
 
 
 class _Parser(argparse.ArgumentParser):

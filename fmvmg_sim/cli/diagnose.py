@@ -1,0 +1,63 @@
+"""``fmvmg diagnose RECORD.csv --scenario NOMINAL.toml``: where the sim-to-real gap lies, which effect causes it."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    """Add the ``diagnose`` sub-command.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+    """
+    p = sub.add_parser("diagnose", help="sim-to-real gap diagnosis of a record", description=(
+        "Calibrate the nominal model on a training window, localise the gap against a re-simulated null, "
+        "attribute it to library effects on forward-chained held-out blocks, and report the held-out gap "
+        "shrink. Writes DIR/report.json (CONTRACTS.md section 4), DIR/report.md and PNG plots."))
+    p.add_argument("record", help="record CSV (CONTRACTS.md section 2)")
+    p.add_argument("--scenario", required=True, help="nominal scenario TOML (device, circuit, noise), "
+                   "e.g. scenarios/nominal_a.toml")
+    p.add_argument("-o", "--out", default=None, help="output folder (default: out/diagnose_<record name>)")
+    p.add_argument("--json", action="store_true", help="print the report as one JSON object on stdout")
+    p.add_argument("--null-runs", type=int, default=None, help="null re-simulations (default 6)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the null re-simulations")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    """Run the sub-command.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+
+    Returns
+    -------
+    int
+    """
+    from ..diagnosis.pipeline import N_NULL, diagnose
+    from ..diagnosis.report import write_report
+    from ..errors import InputError
+    if args.null_runs is not None and args.null_runs < 2:
+        raise InputError("needs at least 2 null re-simulations", "--null-runs")
+    rep = diagnose(args.record, args.scenario, n_null=args.null_runs or N_NULL, seed=args.seed,
+                   progress=False if args.no_progress else None)
+    out = Path(args.out) if args.out else Path("out") / f"diagnose_{Path(args.record).stem}"
+    cj = write_report(rep, out)
+    if not args.no_plots:
+        from ..diagnosis.plots import plot_all
+        plot_all(rep, out)
+    if args.json:
+        sys.stdout.write(json.dumps(cj) + "\n")
+    else:
+        sys.stderr.write(f"fmvmg: diagnose: verdict {cj['verdict']}"
+                         + (f", accepted {cj['accepted']}" if cj["accepted"] else "")
+                         + (f", ambiguous with {cj['ambiguous_with']}" if cj["ambiguous_with"] else "")
+                         + f"; wrote {out}/report.json and report.md ({cj['wall_time_s']:.1f} s)\n")
+    return 0

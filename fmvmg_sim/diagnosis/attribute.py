@@ -1,0 +1,290 @@
+"""Step 3: attribute the gap to library effects, scored on forward-chained held-out blocks.
+
+For each candidate: fit it jointly with the nominal parameters on each fold's training blocks
+(:class:`~.model.EffectModel`), predict the fold's held-out segment, and compare the AR(1)
+negative log-likelihood with the nominal model's (fitted on the same blocks). A candidate is
+accepted when
+
+* the pooled held-out gain per block has a block-bootstrap 95 % interval above zero, and the
+  interval is above zero in at least 2 of the 3 folds;
+* Delta-BIC on the training window is below -10;
+* its parameters lie inside their physical bounds (not pinned at a bound);
+* at least one of its linear parameters is more than 2 standard errors from "no effect".
+
+Two effects: forward selection (the best accepted effect, then each other candidate jointly
+with it, scored against the one-effect model). Noise-level effects (quantisation, flicker) are
+judged separately: the rate output's lattice, and the Allan flicker band against the null.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from tqdm import tqdm
+
+from ..effects import MODELS
+from .calibrate import Calibration
+from .fitting import DEVICE_EFFECTS, PATH_EFFECTS, Fitter
+from .likelihood import block_bootstrap_ci, fit_params, nll
+from .model import NONLINEAR, EffectModel, ModelFit
+
+DELTA_BIC_MAX = -10.0
+FOLDS_NEEDED = 2
+DETERMINISTIC = tuple(e for e in MODELS if e in DEVICE_EFFECTS or e in PATH_EFFECTS)
+
+#: What separates look-alike effects (physics brief section 4, diagnosis methods 2.2 step 8).
+SEPARATING = {
+    frozenset({"thermal_lag", "temperature_rate"}): "two ramp rates plus 1 h post-ramp holds, with the drive "
+        "frequency recorded: a lag offsets the die (f_d) from the sensor and decays in the hold; a gradient "
+        "term scales with the ramp rate and leaves f_d on the sensor temperature",
+    frozenset({"thermal_lag", "thermal_hysteresis"}): "holds of >= 1 h after each ramp direction: a lag decays "
+        "during the hold, hysteresis persists; plot the output against the drive frequency (the die's thermometer)",
+    frozenset({"temperature_rate", "thermal_hysteresis"}): "two ramp rates: the gradient term scales with dT/dt, "
+        "hysteresis depends only on the temperature path",
+    frozenset({"demod_phase_drift", "q_factor_drift"}): "heat the electronics and the MEMS separately, or inject an "
+        "electrical tone at the drive frequency into the sense front end (bypasses the mechanics); Q drift also "
+        "moves the AGC effort",
+    frozenset({"demod_phase_drift", "mode_split_drift"}): "rate-table steps at >= 3 temperatures: the split drift "
+        "changes the scale factor, the phase drift does not",
+    frozenset({"quadrature_drift", "mode_split_drift"}): "rate-table steps at >= 3 temperatures (split drift moves "
+        "the scale factor) and a V_p step (electrostatic split)",
+    frozenset({"feedthrough", "q_factor_drift"}): "step VDC at constant amplitude: feedthrough scales as 1/VDC",
+    frozenset({"reference_drift", "q_factor_drift"}): "step the AGC set-point: reference drift moves the real "
+        "amplitude, Q drift only the effort",
+    frozenset({"stress_relaxation", "quadrature_drift"}): "repeat the temperature cycle: relaxation does not "
+        "repeat, a temperature law does",
+}
+DEFAULT_EXPERIMENT = ("record the auxiliary channels (quadrature, drive amplitude, AGC effort, drive frequency) and "
+                      "add rate-table steps at >= 3 temperatures, two ramp rates and 1 h post-ramp holds")
+
+
+def separating_experiment(a: str, b: str) -> str:
+    """The experiment that would separate two look-alike effects.
+
+    Parameters
+    ----------
+    a, b : str
+
+    Returns
+    -------
+    str
+    """
+    return SEPARATING.get(frozenset({a, b}), DEFAULT_EXPERIMENT)
+
+
+class Scorer:
+    """Forward-chained held-out scoring of model fits against a baseline.
+
+    Parameters
+    ----------
+    fitter : Fitter
+    cal : Calibration
+    noise_params : list of (rho, s), optional
+        AR(1) noise model of each channel's normalised block residual, from the null re-simulations;
+        without it each model's own training residual sets it (a smooth misfit then looks cheap).
+    """
+
+    def __init__(self, fitter: Fitter, cal: Calibration, noise_params: list | None = None):
+        self.f = fitter
+        self.cal = cal
+        #: AR(1) noise model per channel, from the re-simulated null (the same for every model)
+        self.noise_params = noise_params
+        self.folds = fitter.prep.folds()
+        self.train = self.folds[-1]["train"]
+        # the nominal model on each fold
+        self.nominal = self.fold_predictions(lambda rows: (cal.lin.predict(fitter.solve(cal.lin, rows).x), {}))
+        self.nominal_train_pred = cal.lin.predict(cal.solution.x)
+
+    def fold_predictions(self, refit) -> dict:
+        """Predictions of ``refit(rows)`` on each fold, plus the stitched held-out prediction.
+
+        Parameters
+        ----------
+        refit : callable
+            ``rows -> (pred, effects)``.
+
+        Returns
+        -------
+        dict
+            ``folds``: list of (pred, effects); ``heldout``: stitched block prediction (NaN outside tests).
+        """
+        out, ho = [], np.full_like(self.f.Y, np.nan)
+        for fd in self.folds:
+            pred, eff = refit(fd["train"])
+            out.append((pred, eff))
+            ho[fd["test"]] = pred[fd["test"]]
+        return {"folds": out, "heldout": ho}
+
+    def gain(self, cand: dict, base: dict) -> dict:
+        """Held-out NLL gain per block of ``cand`` over ``base`` (both from :meth:`fold_predictions`).
+
+        Parameters
+        ----------
+        cand, base : dict
+
+        Returns
+        -------
+        dict
+            ``gain``, ``ci``, ``folds`` (per-fold gain and interval), ``folds_passed``.
+        """
+        allv, folds = [], []
+        for k, fd in enumerate(self.folds):
+            d = []
+            for pred in (base["folds"][k][0], cand["folds"][k][0]):
+                Z = self.f.normalized_residual(pred)
+                par = self.noise_params or fit_params(Z[fd["train"]])
+                d.append(nll(Z[fd["test"]], par))
+            diff = d[0] - d[1]
+            lo, hi = block_bootstrap_ci(diff, seed=k)
+            folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi]})
+            allv.append(diff)
+        pooled = np.concatenate(allv)
+        lo, hi = block_bootstrap_ci(pooled, seed=99)
+        return {"gain": float(np.mean(pooled)), "ci": [lo, hi], "folds": folds,
+                "folds_passed": int(sum(f["ci"][0] > 0 for f in folds))}
+
+    def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int) -> float:
+        """BIC(candidate) - BIC(base) on the training window (AR(1) likelihood).
+
+        Parameters
+        ----------
+        pred_cand, pred_base : ndarray
+        k_extra : int
+
+        Returns
+        -------
+        float
+        """
+        rows = self.train
+        v = []
+        for pred in (pred_cand, pred_base):
+            Z = self.f.normalized_residual(pred)[rows]
+            v.append(float(np.sum(nll(Z, self.noise_params or fit_params(Z)))))
+        n = int(np.isfinite(self.f.normalized_residual(pred_base)[rows]).sum())
+        return 2 * (v[0] - v[1]) + k_extra * np.log(max(n, 2))
+
+
+def _in_bounds(eff: dict) -> bool:
+    """Every parameter inside its physical bounds and not pinned at a bound (other than a natural zero)."""
+    for n, ps in eff.items():
+        for p, v in ps.items():
+            s = MODELS[n][p]
+            eps = 1e-3 * (s.hi - s.lo)
+            if not s.lo <= v <= s.hi:
+                return False
+            if v != 0.0 and (v - s.lo < eps or s.hi - v < eps):
+                return False
+    return True
+
+
+def _significant_param(mf: ModelFit, names: list) -> bool:
+    for n in names:
+        for p, sd in mf.sd.get(n, {}).items():
+            v = mf.effects[n][p]
+            if np.isfinite(sd) and sd > 0 and abs(v) > 2 * sd:
+                return True
+            if n == "thermal_lag" and p == "offset_K":
+                return True  # the lag's effect is its time constant, scored by the held-out gain
+    return False
+
+
+def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarray, fixed: dict | None = None,
+             k_base: int = 0) -> dict:
+    """Fit ``names`` (with ``fixed`` nonlinear parameters) and score it against ``base``.
+
+    Parameters
+    ----------
+    scorer : Scorer
+    names : list of str
+    base : dict
+        Baseline fold predictions.
+    base_pred_train : ndarray
+        Baseline prediction of the training-window fit.
+    fixed : dict, optional
+    k_base : int, optional
+        Parameters of the baseline's effects (for Delta-BIC).
+
+    Returns
+    -------
+    dict
+    """
+    try:
+        em = EffectModel(scorer.f, scorer.cal, names, fixed)
+        mf = em.fit(scorer.train)
+        preds = scorer.fold_predictions(mf.refit)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # outside the model's domain
+        return {"names": list(names), "fit": None, "preds": None, "error": f"{type(exc).__name__}: {exc}",
+                "gain": {"gain": -np.inf, "ci": [-np.inf, -np.inf], "folds": [], "folds_passed": 0},
+                "delta_bic": np.inf, "in_bounds": False, "param_significant": False, "accepted": False}
+    g = scorer.gain(preds, base)
+    k = sum(len(MODELS[n]) for n in names) - k_base
+    dbic = scorer.delta_bic(mf._ctx["pred"], base_pred_train, k)
+    inb = _in_bounds(mf.effects)
+    sig = _significant_param(mf, [n for n in names])
+    acc = bool(g["ci"][0] > 0 and g["folds_passed"] >= FOLDS_NEEDED and dbic < DELTA_BIC_MAX and inb and sig)
+    return {"names": list(names), "fit": mf, "preds": preds, "gain": g, "delta_bic": float(dbic),
+            "in_bounds": inb, "param_significant": sig, "accepted": acc}
+
+
+def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_pairs: int = 5) -> dict:
+    """Single-effect scan, then forward selection of a second effect.
+
+    Parameters
+    ----------
+    scorer : Scorer
+    progress : bool, optional
+    max_effects : int, optional
+    top_pairs : int, optional
+        Second effects tried with the best one.
+
+    Returns
+    -------
+    dict
+        ``single``: {effect: evaluation}; ``selected``: list of effect names; ``final``: evaluation of the
+        selected set (or None); ``pair_scan``: {effect: evaluation with the first}.
+    """
+    base = scorer.nominal
+    single = {}
+    for n in tqdm(DETERMINISTIC, disable=not progress, file=sys.stderr, desc="attribution", unit="effect"):
+        single[n] = evaluate(scorer, [n], base, scorer.nominal_train_pred)
+    acc = [n for n in single if single[n]["accepted"]]
+    selected, final, pair_scan = [], None, {}
+    if acc:
+        best = max(acc, key=lambda n: single[n]["gain"]["gain"])
+        selected, final = [best], single[best]
+        if max_effects > 1:
+            fixed = EffectModel(scorer.f, scorer.cal, [best]).fixed_nonlinear(final["fit"].effects)
+            others = sorted((n for n in single if n != best and single[n]["fit"] is not None
+                             and single[n]["gain"]["gain"] > 0),
+                            key=lambda n: -single[n]["gain"]["gain"])[:top_pairs]
+            for n in others:
+                if n in NONLINEAR and best in NONLINEAR and n == best:
+                    continue
+                # the first effect's nonlinear parameter is refitted unless the second has its own
+                fx = fixed if n in NONLINEAR else {}
+                pair_scan[n] = evaluate(scorer, [best, n], final["preds"], final["fit"]._ctx["pred"], fx,
+                                        k_base=len(MODELS[best]))
+            acc2 = [n for n in pair_scan if pair_scan[n]["accepted"]]
+            if acc2:
+                second = max(acc2, key=lambda n: pair_scan[n]["gain"]["gain"])
+                selected.append(second)
+                final = pair_scan[second]
+    return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan}
+
+
+def ambiguity(single: dict, best: str) -> list[str]:
+    """Effects whose held-out gain lies inside the best one's confidence interval.
+
+    Parameters
+    ----------
+    single : dict
+    best : str
+
+    Returns
+    -------
+    list of str
+    """
+    lo = single[best]["gain"]["ci"][0]
+    return [n for n, ev in single.items() if n != best and ev["fit"] is not None and ev["in_bounds"]
+            and ev["gain"]["gain"] >= lo and ev["gain"]["ci"][0] > 0]

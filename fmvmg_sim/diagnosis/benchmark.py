@@ -1,0 +1,177 @@
+"""``fmvmg diagnose-benchmark``: generate labelled cases, diagnose them on Dask, score against the labels.
+
+The diagnoser sees only each case's record and the nominal scenario; the labels are read back by
+the scorer after every diagnosis has returned. Scores (measured, never tuned to the labels):
+
+* ``false_alarm_rate``: null cases where any effect was claimed (or the verdict was not "none");
+* ``top1`` / ``top2``: single-effect cases above the detection limit (SNR tier "above") whose effect
+  is first / in the first two of the ranking, with a verdict other than "none";
+* ``pairs_exact``: two-effect cases whose accepted set equals the truth;
+* ``truth_in_ambiguity_set``: effect cases whose true effect is accepted or in an ambiguity set;
+* ``median_shrink``: held-out gap shrink of the accepted effect when the attribution is right;
+* ``param_rel_error_median``: relative error of the recovered parameters when right;
+* every rate also by SNR tier.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..record import atomic_write_text
+
+
+def _diagnose_case(record: str, scenario: str, n_null: int, out_dir: str) -> dict:
+    """Worker: diagnose one record (the only inputs: the record and the nominal scenario)."""
+    import warnings
+
+    from .pipeline import diagnose
+    from .report import write_report
+    warnings.simplefilter("ignore")
+    try:
+        rep = diagnose(record, scenario, n_null=n_null, progress=False, log=lambda m: None)
+    except Exception as exc:  # a failed diagnosis is scored as a failure, not hidden
+        return {"record": record, "error": f"{type(exc).__name__}: {exc}"}
+    cj = write_report(rep, Path(out_dir))
+    return {"record": record, "verdict": cj["verdict"], "accepted": cj["accepted"],
+            "ambiguous_with": cj["ambiguous_with"], "ranked": [r["effect"] for r in cj["ranked"]],
+            "rows": {r["effect"]: {"params": r.get("params"), "shrink": r.get("shrink"), "accepted": r["accepted"]}
+                     for r in cj["ranked"]},
+            "combined": cj.get("combined"), "wall_time_s": cj["wall_time_s"]}
+
+
+def _make(k, seed, out, scenario, duration_s, rate_Hz):
+    from .cases import make_case
+    return make_case(k, seed, Path(out), scenario, duration_s, rate_Hz)
+
+
+def score(labels: list[dict], results: list[dict]) -> dict:
+    """Score diagnoses against labels.
+
+    Parameters
+    ----------
+    labels, results : list of dict
+        Same order.
+
+    Returns
+    -------
+    dict
+    """
+    rows = []
+    for lab, res in zip(labels, results):
+        truth = sorted(lab["effects"])
+        err = "error" in res
+        acc = [] if err else res["accepted"]
+        ranked = [] if err else res["ranked"]
+        amb = set() if err else {x for v in res["ambiguous_with"].values() for x in v}
+        claimed = (not err) and (res["verdict"] != "none" or bool(acc))
+        r = {"case": lab["case"], "truth": truth, "tier": lab["tier"], "snr": lab["snr"], "error": res.get("error"),
+             "verdict": None if err else res["verdict"], "accepted": acc}
+        if not truth:
+            r["false_alarm"] = bool(claimed)
+        elif len(truth) == 1:
+            t = truth[0]
+            r["top1"] = bool(claimed and ranked[:1] == [t] and acc[:1] == [t])
+            r["top2"] = bool(claimed and t in ranked[:2] and t in (set(acc) | amb))
+            r["in_set"] = bool(t in acc or t in amb)
+        else:
+            r["pair_exact"] = bool(sorted(acc) == truth)
+            r["pair_one"] = bool(set(acc) & set(truth))
+            r["in_set"] = bool(set(truth) <= (set(acc) | amb))
+        right = [t for t in truth if t in acc]
+        if right and not err:
+            sh = [res["rows"][t]["shrink"] for t in right if res["rows"].get(t, {}).get("shrink") is not None]
+            r["shrink"] = float(np.median(sh)) if sh else None
+            errs = []
+            for t in right:
+                for p, v in lab["effects"][t].items():
+                    est = (res["rows"][t].get("params") or {}).get(p)
+                    if est is not None and v != 0:
+                        errs.append(abs(est - v) / abs(v))
+            r["param_rel_error"] = float(np.median(errs)) if errs else None
+        rows.append(r)
+
+    def rate(key, sel):
+        v = [r[key] for r in rows if key in r and sel(r)]
+        return (float(np.mean(v)) if v else None), len(v)
+
+    out = {"cases": len(rows), "errors": sum(r["error"] is not None for r in rows)}
+    out["false_alarm_rate"], out["null_cases"] = rate("false_alarm", lambda r: True)
+    out["top1"], out["single_above"] = rate("top1", lambda r: r["tier"] == "above")
+    out["top2"], _ = rate("top2", lambda r: r["tier"] == "above")
+    out["pairs_exact"], out["pair_cases"] = rate("pair_exact", lambda r: True)
+    out["pairs_at_least_one"], _ = rate("pair_one", lambda r: True)
+    out["truth_in_ambiguity_set"], _ = rate("in_set", lambda r: r["tier"] == "above")
+    sh = [r["shrink"] for r in rows if r.get("shrink") is not None]
+    out["median_shrink"] = float(np.median(sh)) if sh else None
+    pe = [r["param_rel_error"] for r in rows if r.get("param_rel_error") is not None]
+    out["param_rel_error_median"] = float(np.median(pe)) if pe else None
+    out["by_tier"] = {}
+    for t in ("below", "near", "above"):
+        out["by_tier"][t] = {"single_cases": rate("top1", lambda r: r["tier"] == t)[1],
+                             "top1": rate("top1", lambda r: r["tier"] == t)[0],
+                             "top2": rate("top2", lambda r: r["tier"] == t)[0],
+                             "pair_cases": rate("pair_exact", lambda r: r["tier"] == t)[1],
+                             "pairs_exact": rate("pair_exact", lambda r: r["tier"] == t)[0]}
+    out["rows"] = rows
+    return out
+
+
+def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: str | None = None,
+                  duration_s: float = 3 * 3600.0, rate_Hz: float = 1.0, n_null: int = 4,
+                  n_workers: int = 2, progress: bool = True) -> dict:
+    """Generate, diagnose (on Dask) and score ``n_cases`` cases.
+
+    Parameters
+    ----------
+    n_cases, seed : int
+    out : Path
+    scenario : str
+        Nominal scenario.
+    scheduler : str, optional
+        Address of an existing Dask scheduler; default a LocalCluster.
+    duration_s, rate_Hz : float, optional
+        Case records.
+    n_null : int, optional
+        Null re-simulations per diagnosis.
+    n_workers : int, optional
+    progress : bool, optional
+
+    Returns
+    -------
+    dict
+        The scores.
+    """
+    from dask.distributed import Client, LocalCluster, as_completed
+    from tqdm import tqdm
+    out.mkdir(parents=True, exist_ok=True)
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futs = client.map(_make, range(n_cases), seed=seed, out=str(out), scenario=str(scenario),
+                          duration_s=duration_s, rate_Hz=rate_Hz, pure=False)
+        recs = []
+        for f in tqdm(as_completed(futs), total=n_cases, disable=not progress, file=sys.stderr, desc="cases"):
+            recs.append(f.result()["record"])  # the label itself stays on disk until scoring
+        recs = sorted(recs)
+        dfuts = [client.submit(_diagnose_case, r, str(scenario), n_null, str(out / "reports" / Path(r).stem),
+                               pure=False) for r in recs]
+        for _ in tqdm(as_completed(dfuts), total=len(dfuts), disable=not progress, file=sys.stderr, desc="diagnoses"):
+            pass
+        results = [f.result() for f in dfuts]
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    labels = [json.loads((out / "labels" / f"{Path(r).stem}.json").read_text()) for r in recs]
+    sc = score(labels, results)
+    sc.update(seed=seed, case_duration_s=duration_s, case_rate_Hz=rate_Hz, null_runs=n_null)
+    atomic_write_text(out / "scores.json", json.dumps(sc, indent=1, default=float) + "\n")
+    return sc

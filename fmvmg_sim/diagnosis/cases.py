@@ -1,0 +1,218 @@
+"""Labelled benchmark cases: simulated 'measured' records whose effects are withheld from the diagnoser.
+
+A case is the nominal device perturbed within its unit-to-unit tolerances, plus zero, one or two
+library effects with parameters drawn from their prior ranges (random sign where either is
+plausible) and scaled to span signal-to-noise ratios from below to well above the detection
+limit, simulated with the envelope engine and a fresh noise seed on a random temperature profile
+(holds and ramps at random temperatures and rates, sometimes rate-table steps). Records go to
+``cases/``; labels (effects, parameters, perturbations, seed, SNR) to ``labels/`` - a separate file
+the diagnoser is never given.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..effects import MODELS, validate_effects
+from ..profiles import PiecewiseProfile
+from ..record import atomic_write_text, write_record
+from .parameters import NOMINAL_KNOBS, apply_nominal
+
+#: Case mix.
+P_NULL, P_SINGLE = 0.20, 0.55
+#: SNR tiers of the signature left after the nominal calibration absorbs what it can.
+SNR_TIERS = ((0.0, 3.0, "below"), (3.0, 10.0, "near"), (10.0, np.inf, "above"))
+
+
+def tier(snr: float) -> str:
+    """SNR tier name.
+
+    Parameters
+    ----------
+    snr : float
+
+    Returns
+    -------
+    str
+    """
+    return next(n for lo, hi, n in SNR_TIERS if lo <= snr < hi)
+
+
+def random_profile(rng: np.random.Generator, duration_s: float) -> tuple[list, list]:
+    """A random oven profile: holds and ramps (0.3-2 K/min) between random temperatures in [-30, 70] C.
+
+    Parameters
+    ----------
+    rng : Generator
+    duration_s : float
+
+    Returns
+    -------
+    temperature_points, rate_points : list of [t_s, value]
+    """
+    t, T = 0.0, float(rng.uniform(10, 35))
+    pts = [[0.0, T]]
+    while t < duration_s:
+        if rng.random() < 0.4:
+            t += float(rng.uniform(600, 2700))
+        else:
+            target = float(np.clip(T + rng.choice([-1, 1]) * rng.uniform(15, 60), -30, 70))
+            if abs(target - T) < 5:
+                target = T + (20 if T < 20 else -20)
+            rate = float(rng.uniform(0.3, 2.0))
+            t += abs(target - T) / rate * 60.0
+            T = target
+        pts.append([t, T])
+    rpts = [[0.0, 0.0]]
+    if rng.random() < 0.3:  # rate-table steps
+        n = int(rng.integers(2, 5))
+        for k in range(n):
+            t0 = float(rng.uniform(0.1, 0.9) * duration_s)
+            r = float(rng.choice([-1, 1]) * rng.uniform(10, 100))
+            rpts += [[t0, 0.0], [t0 + 1.0, r], [t0 + 300.0, r], [t0 + 301.0, 0.0]]
+        rpts = sorted(rpts)
+        clean = [rpts[0]]
+        for p in rpts[1:]:
+            if p[0] > clean[-1][0]:
+                clean.append(p)
+        rpts = clean
+    return pts, rpts
+
+
+def draw_effect(rng: np.random.Generator, name: str, scale: float) -> dict:
+    """Parameters of one effect from its prior ranges, with its amplitude parameters scaled.
+
+    Parameters
+    ----------
+    rng : Generator
+    name : str
+    scale : float
+        Multiplies amplitude-like parameters (not time constants or widths).
+
+    Returns
+    -------
+    dict
+    """
+    out = {}
+    for p, s in MODELS[name].items():
+        v = float(np.exp(rng.uniform(np.log(s.prior[0]), np.log(s.prior[1]))))
+        if p not in ("tau_s", "width_K", "tau_h"):
+            v *= scale
+            if s.signed and rng.random() < 0.5:
+                v = -v
+        out[p] = float(np.clip(v, s.lo, s.hi))
+    return out
+
+
+def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: float = 3 * 3600.0,
+              output_rate_Hz: float = 1.0) -> dict:
+    """Generate case ``k``: write ``cases/case_k.csv`` and ``labels/case_k.json``.
+
+    Parameters
+    ----------
+    k, seed : int
+    out : Path
+    scenario_path : str
+        Nominal scenario.
+    duration_s, output_rate_Hz : float, optional
+
+    Returns
+    -------
+    dict
+        The label.
+    """
+    from ..envelope.engine import run_envelope
+    from ..scenario import load_scenario
+    rng = np.random.default_rng([seed, k])
+    u = rng.random()
+    names = list(MODELS)
+    if u < P_NULL:
+        effects = []
+    elif u < P_NULL + P_SINGLE:
+        effects = [names[k % len(names)] if rng.random() < 0.5 else str(rng.choice(names))]
+    else:
+        effects = [str(x) for x in rng.choice(names, 2, replace=False)]
+    scale = float(np.exp(rng.uniform(np.log(0.1), np.log(3.0))))
+    eff = {n: draw_effect(rng, n, scale) for n in effects}
+    eff = validate_effects(eff, "case")
+    theta = {kn.name: float(rng.uniform(-1, 1) * kn.tolerance) for kn in NOMINAL_KNOBS}
+    scn = load_scenario(scenario_path)
+    s = copy.copy(scn)
+    s.settings = copy.deepcopy(scn.settings)
+    s.settings["scenario"].update(duration_s=duration_s, output_rate_Hz=output_rate_Hz,
+                                  seed=int(rng.integers(0, 2 ** 31)), fidelity="envelope")
+    s.settings["initial"]["state"] = "steady"
+    tp, rp = random_profile(rng, duration_s)
+    s.temperature = PiecewiseProfile(np.array([p[0] for p in tp]), np.array([p[1] for p in tp]), [])
+    s.rate = PiecewiseProfile(np.array([p[0] for p in rp]), np.array([p[1] for p in rp]), [])
+    from ..effects import EffectSet
+    s.device_nominal = scn.device_nominal
+    s.device = EffectSet(eff).apply_to_device(apply_nominal(scn.device_nominal, theta))
+    s.effects = eff
+    res = run_envelope(s, progress=False, log=lambda m: None)
+    rec = res.to_record()
+    rec.metadata = {"device": scn.device.name, "source": "diagnose-benchmark case"}
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    (out / "labels").mkdir(parents=True, exist_ok=True)
+    path = out / "cases" / f"case_{k:04d}.csv"
+    write_record(path, rec)
+    label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "amplitude_scale": scale,
+             "sim_seed": s.seed, "temperature_points": tp, "rate_points": rp}
+    label["snr"] = signature_snr(path, scenario_path, s.device_nominal, theta, eff)
+    label["tier"] = tier(label["snr"]) if effects else "null"
+    atomic_write_text(out / "labels" / f"case_{k:04d}.json", json.dumps(label, indent=1) + "\n")
+    return label
+
+
+def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effects: dict) -> float:
+    """Signal-to-noise ratio of the effects' signature that the nominal calibration cannot absorb.
+
+    The noise-free truth (quasi-static model of the perturbed device with the effects) replaces the
+    record's blocks; the calibrated nominal model's weighted residual norm ``sqrt(chi^2)`` is the SNR.
+    Noise-level effects: ``10 x`` their added variance over the nominal one in their band.
+
+    Parameters
+    ----------
+    record_path : path-like
+    scenario_path : path-like
+    device_nominal : Device
+    theta, effects : dict
+
+    Returns
+    -------
+    float
+    """
+    if not effects:
+        return 0.0
+    from ..averaged import scale_factor_V_per_dps
+    from ..diagram import build_diagram
+    from ..record import read_record
+    from .calibrate import calibrate
+    from .data import prepare
+    from .fitting import PATH_EFFECTS, Fitter
+    snr_noise = 0.0
+    nz = device_nominal.values["noise"]
+    if "quantization" in effects:
+        snr_noise = max(snr_noise, 10 * (effects["quantization"]["lsb_V"] ** 2 - nz["quantization_lsb_V"] ** 2)
+                        / 12 / (8e-4) ** 2)
+    if "flicker_noise" in effects:
+        f = effects["flicker_noise"]
+        base = nz["flicker_output_dps2"] + nz["flicker_phase_rad2"] * np.deg2rad(200.0) ** 2 * (180 / np.pi) ** 2
+        snr_noise = max(snr_noise, 10 * (f["h_output_dps2"] + f["h_phase_rad2"] * (200.0) ** 2) / base)
+    det = {n: v for n, v in effects.items() if n not in ("quantization", "flicker_noise")}
+    if not det:
+        return float(snr_noise)
+    rec = read_record(record_path, warn_unknown=False)
+    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
+    prep = prepare(rec, sf)
+    fit = Fitter(prep, device_nominal)
+    path = fit.path({n: v for n, v in det.items() if n in PATH_EFFECTS})
+    truth = fit.table(theta, det, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
+    truth[:, ~fit.present] = np.nan
+    fit.Y = truth
+    cal = calibrate(fit, np.ones(prep.n_blocks, bool))
+    return float(max(np.sqrt(cal.solution.cost), snr_noise))

@@ -1,0 +1,346 @@
+"""Linearised weighted least squares on block data: the engine under calibration and attribution.
+
+A model is the quasi-static forward model of a device (nominal deviations ``theta`` and
+temperature-law effects folded in) on a path (die temperature, equivalent rate, quadrature
+change: the path effects). Around a linearisation point its block predictions are
+``y0 + sum_k cols_k (x_k - x0_k)``; the columns are finite-difference response tables
+(device parameters) or analytic (path-effect amplitudes). Gauss-Newton rebuilds ``y0`` (and the
+effect columns) at the new point; the nominal columns are built once, at calibration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..effects import MODELS, EffectSet
+from .data import Prepared
+from .forward import CHANNELS, ResponseTable, response_table, temperature_grid
+from .parameters import NOMINAL_KNOBS, apply_effects, apply_nominal
+
+#: Effects folded into the device (temperature laws); the others act on the path or the noise.
+DEVICE_EFFECTS = ("demod_phase_drift", "quadrature_drift", "q_factor_drift", "mode_split_drift",
+                  "feedthrough", "duffing", "reference_drift")
+PATH_EFFECTS = ("thermal_lag", "thermal_hysteresis", "temperature_rate", "stress_relaxation")
+NOISE_EFFECTS = ("flicker_noise", "quantization")
+
+
+@dataclass
+class Lin:
+    """A linearised model on blocks.
+
+    Attributes
+    ----------
+    y0 : ndarray, shape (n, C)
+        Prediction at ``x0``.
+    cols : ndarray, shape (n, C, K)
+        Sensitivities.
+    names : list of str
+    x0 : ndarray, shape (K,)
+    prior_sd : ndarray, shape (K,)
+        Prior standard deviation about 0 (NaN: no prior).
+    lo, hi : ndarray
+        Bounds.
+    """
+
+    y0: np.ndarray
+    cols: np.ndarray
+    names: list
+    x0: np.ndarray
+    prior_sd: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        """Block predictions at ``x``.
+
+        Parameters
+        ----------
+        x : ndarray
+
+        Returns
+        -------
+        ndarray, shape (n, C)
+        """
+        return self.y0 + self.cols @ (np.asarray(x) - self.x0)
+
+
+@dataclass
+class Solution:
+    """A weighted least-squares solution.
+
+    Attributes
+    ----------
+    x : ndarray
+    cov : ndarray
+        Covariance (inflated by the reduced chi-square when above 1).
+    cost : float
+        Weighted sum of squares of the data rows.
+    n : int
+        Data rows used.
+    """
+
+    x: np.ndarray
+    cov: np.ndarray
+    cost: float
+    n: int
+
+
+class Fitter:
+    """Block data of one record plus the forward model of one device.
+
+    Parameters
+    ----------
+    prep : Prepared
+    device : fmvmg_sim.device.Device
+        The data-sheet (nominal) device.
+    """
+
+    def __init__(self, prep: Prepared, device):
+        self.prep = prep
+        self.device0 = device
+        self.Y = prep.block_obs()
+        self.S = prep.block_sigma()
+        self.present = np.array([c in prep.channels for c in CHANNELS])
+        self.has_rate = bool(np.any(prep.rate_true_dps != 0))
+        c = prep.case_C
+        self.grid = temperature_grid(np.min(c) - 6.0, np.max(c) + 6.0)
+        self.rate_b = prep.block_mean(prep.rate_true_dps)
+        self._nom_jac = None
+        self._nom_jac_theta = None
+        self.table_builds = 0
+        self._paths = {}
+
+    # ---- devices and tables -------------------------------------------------------------
+    def device(self, theta: dict, effects: dict | None = None):
+        """Data-sheet device with nominal deviations and the device effects of ``effects``.
+
+        Parameters
+        ----------
+        theta : dict
+        effects : dict, optional
+
+        Returns
+        -------
+        Device
+        """
+        dev = apply_nominal(self.device0, theta)
+        eff = {k: v for k, v in (effects or {}).items() if k in DEVICE_EFFECTS}
+        return apply_effects(dev, eff)
+
+    def table(self, theta: dict, effects: dict | None = None, quad: bool = False,
+              rate: bool = False) -> ResponseTable:
+        """Response table of the model at ``(theta, effects)``.
+
+        Parameters
+        ----------
+        theta, effects : dict
+        quad : bool
+            Also the quadrature sensitivity.
+        rate : bool
+            Also the rate sensitivity (always when the record has an applied rate).
+
+        Returns
+        -------
+        ResponseTable
+        """
+        self.table_builds += 1
+        eff = effects or {}
+        rate = rate or self.has_rate
+        return response_table(self.device(theta, eff), self.grid, with_rate=rate, with_quad=quad)
+
+    def diff_table(self, t1: ResponseTable, t0: ResponseTable, step: float) -> ResponseTable:
+        """(t1 - t0) / step as a table.
+
+        Parameters
+        ----------
+        t1, t0 : ResponseTable
+        step : float
+
+        Returns
+        -------
+        ResponseTable
+        """
+        return ResponseTable(self.grid, (t1.base - t0.base) / step, (t1.d_rate - t0.d_rate) / step,
+                             np.zeros_like(t0.base))
+
+    def nominal_jacobian(self, theta: dict, base: ResponseTable) -> list:
+        """Finite-difference tables of the nominal knobs at ``theta`` (cached after the first call).
+
+        Parameters
+        ----------
+        theta : dict
+        base : ResponseTable
+
+        Returns
+        -------
+        list of ResponseTable
+        """
+        if self._nom_jac is None:
+            out = []
+            for k in NOMINAL_KNOBS:
+                th = dict(theta)
+                th[k.name] = th.get(k.name, 0.0) + k.step
+                out.append(self.diff_table(self.table(th), base, k.step))
+            self._nom_jac = out
+            self._nom_jac_theta = dict(theta)
+        return self._nom_jac
+
+    # ---- paths ---------------------------------------------------------------------------
+    def path(self, effects: dict | None) -> dict:
+        """Block means of the die temperature, the equivalent rate and the quadrature change.
+
+        Parameters
+        ----------
+        effects : dict or None
+
+        Returns
+        -------
+        dict
+            ``die`` (full rate), ``die_b``, ``rate_b`` (applied + equivalent), ``quad_b``, ``dTdt_b`` (die, K/min),
+            ``relax_b`` (t in s for stress relaxation templates).
+        """
+        key = repr(sorted((effects or {}).items()))
+        if key in self._paths:
+            return self._paths[key]
+        p = self.prep
+        fx = EffectSet({k: v for k, v in (effects or {}).items() if k in PATH_EFFECTS})
+        die = fx.die_temperature(p.t_mid_s, p.case_C)
+        sig = fx.signals(p.t_mid_s, die)
+        out = dict(die=die, die_b=p.block_mean(die), rate_b=self.rate_b + p.block_mean(sig["rate_dps"]),
+                   quad_b=p.block_mean(sig["quad_rel"]))
+        out["dTdt_b"] = p.block_mean(np.gradient(die, p.t_mid_s) * 60.0) if len(die) > 1 else np.zeros(p.n_blocks)
+        if len(self._paths) > 64:
+            self._paths.clear()
+        self._paths[key] = out
+        return out
+
+    # ---- linearisation and solve --------------------------------------------------------
+    def nominal_lin(self, theta: dict, base: ResponseTable, path: dict, jac: list | None = None) -> Lin:
+        """Linearisation in the nominal knobs at ``theta`` on ``path``.
+
+        Parameters
+        ----------
+        theta : dict
+        base : ResponseTable
+        path : dict
+        jac : list of ResponseTable, optional
+
+        Returns
+        -------
+        Lin
+        """
+        jac = jac if jac is not None else self.nominal_jacobian(theta, base)
+        die, rate, quad = path["die_b"], path["rate_b"], path["quad_b"]
+        y0 = base.evaluate(die, rate, quad)
+        cols = np.stack([j.evaluate(die, rate) for j in jac], axis=-1)
+        K = len(NOMINAL_KNOBS)
+        return Lin(y0, cols, [k.name for k in NOMINAL_KNOBS], np.array([theta.get(k.name, 0.0) for k in NOMINAL_KNOBS]),
+                   np.array([k.tolerance for k in NOMINAL_KNOBS]),
+                   np.array([max(-4 * k.tolerance, -0.9) if k.kind.endswith("rel") else -4 * k.tolerance
+                             for k in NOMINAL_KNOBS]),
+                   np.array([4 * k.tolerance for k in NOMINAL_KNOBS]))
+
+    def solve(self, lin: Lin, rows: np.ndarray, extra_cols: np.ndarray | None = None) -> Solution:
+        """Weighted, prior-regularised, bounded linear least squares on the blocks in ``rows``.
+
+        Parameters
+        ----------
+        lin : Lin
+        rows : ndarray of bool
+            Blocks to fit.
+        extra_cols : ndarray, optional
+            Unused (kept for symmetry).
+
+        Returns
+        -------
+        Solution
+        """
+        W = 1.0 / self.S[rows]
+        r0 = (self.Y[rows] - lin.y0[rows]) * W
+        A = lin.cols[rows] * W[:, :, None]
+        ok = np.isfinite(r0) & self.present[None, :]
+        b = r0[ok]
+        M = A[ok]
+        n = len(b)
+        K = len(lin.x0)
+        # priors: (x0 + d)/sd ~ N(0, 1)  ->  rows d/sd = -x0/sd
+        pr = np.isfinite(lin.prior_sd)
+        P = np.zeros((pr.sum(), K))
+        P[np.arange(pr.sum()), np.flatnonzero(pr)] = 1.0 / lin.prior_sd[pr]
+        pb = -lin.x0[pr] / lin.prior_sd[pr]
+        # normal equations (K is small), column-scaled; bounds solved on the K x K Cholesky factor
+        MtM, Mtb = M.T @ M, M.T @ b
+        PtP, Ptb = P.T @ P, P.T @ pb
+        H, g = MtM + PtP, Mtb + Ptb
+        scale = np.sqrt(np.clip(np.diag(H), 0, None))
+        scale = np.where(scale > 0, scale, 1.0)
+        Hs = H / np.outer(scale, scale) + 1e-12 * np.eye(K)
+        gs = g / scale
+        lo = (lin.lo - lin.x0) * scale
+        hi = (lin.hi - lin.x0) * scale
+        lo = np.where(lo >= hi, hi - 1e-12, lo)
+        ds = np.linalg.solve(Hs, gs)
+        if np.any(ds < lo) or np.any(ds > hi):
+            R = np.linalg.cholesky(Hs).T
+            c = np.linalg.solve(R.T, gs)
+            ds = lsq_linear(R, c, bounds=(lo, hi), method="bvls").x
+        d = ds / scale
+        x = lin.x0 + d
+        cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
+        cov = scaled_inverse(M.T @ M + P.T @ P)
+        red = cost / max(n - K, 1)
+        cov = cov * max(red, 1.0)
+        return Solution(x, cov, cost, n)
+
+    def normalized_residual(self, pred: np.ndarray) -> np.ndarray:
+        """(observed - predicted) / sigma per block and channel (NaN for absent channels).
+
+        Parameters
+        ----------
+        pred : ndarray, shape (n, C)
+
+        Returns
+        -------
+        ndarray
+        """
+        Z = (self.Y - pred) / self.S
+        Z[:, ~self.present] = np.nan
+        return Z
+
+
+def effect_bounds(name: str) -> tuple[list, np.ndarray, np.ndarray]:
+    """Parameter names and physical bounds of an effect.
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    names, lo, hi
+    """
+    spec = MODELS[name]
+    return list(spec), np.array([p.lo for p in spec.values()]), np.array([p.hi for p in spec.values()])
+
+
+def scaled_inverse(H: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive (semi)definite matrix, robust to very different scales.
+
+    Parameters
+    ----------
+    H : ndarray
+
+    Returns
+    -------
+    ndarray
+        The inverse; degenerate directions get a large (not zero) variance.
+    """
+    d = np.sqrt(np.clip(np.diag(H), 1e-150, None))
+    Hs = H / np.outer(d, d)
+    w, V = np.linalg.eigh(Hs)
+    w = np.maximum(w, 1e-14 * max(w.max(), 1e-300))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        return (V / w) @ V.T / np.outer(d, d)

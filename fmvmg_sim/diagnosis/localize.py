@@ -1,0 +1,199 @@
+"""Step 2: localise the gap against a null re-simulated from the calibrated nominal model.
+
+The calibrated nominal device is simulated with its noise (:func:`fmvmg_sim.envelope.engine.run_envelope`)
+on the record's own temperature and rate, a few times with fresh seeds; each null record goes
+through the same residual statistics as the measured one. A statistic is significant when it
+lies above its null distribution (Student-t on the log statistic, ``M - 1`` degrees of freedom),
+after Holm's correction across all statistics (channels x Allan bands x regimes x direction).
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+
+import numpy as np
+from scipy import stats
+from tqdm import tqdm
+
+from ..analysis.allan import allan_deviation
+from ..profiles import PiecewiseProfile
+from .data import Prepared
+from .forward import CHANNELS, IQUAD, IRATE
+
+#: Allan bands of the rate residual (tau ranges in s).
+ALLAN_BANDS = {"white": (0.0, 2.0), "flicker": (10.0, 300.0), "random_walk": (300.0, 2000.0),
+               "drift": (2000.0, np.inf)}
+REGIMES = ("hold", "heating", "cooling", "post_ramp_hold", "settled_hold")
+ALPHA = 0.05
+
+
+def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool = False) -> list[dict]:
+    """Simulate the calibrated nominal model with noise on the record's inputs, ``n`` times.
+
+    Parameters
+    ----------
+    scn : Scenario
+        The nominal scenario (noise switches, engine settings).
+    device : Device
+        The calibrated device.
+    prep : Prepared
+    n : int
+    seed : int
+    progress : bool, optional
+
+    Returns
+    -------
+    list of dict
+        Channel arrays at the record's sample times.
+    """
+    from ..envelope.engine import run_envelope
+    dt = prep.sample_interval_s
+    # profiles thinned to one point per ~5 s, keeping both sides of every rate step
+    k = max(1, int(round(5.0 / dt)))
+    keep = np.zeros(len(prep.t_s), bool)
+    keep[::k] = True
+    keep[-1] = True
+    steps = np.flatnonzero(np.diff(prep.rate_true_dps) != 0)
+    keep[steps] = True
+    keep[np.minimum(steps + 1, len(keep) - 1)] = True
+    tp = np.concatenate([[0.0], prep.t_s[keep]])
+    Tp = np.concatenate([[prep.case_at_t_C[0]], prep.case_at_t_C[keep]])
+    rp = np.concatenate([[prep.rate_true_dps[0]], prep.rate_true_dps[keep]])
+    idx = np.clip(np.round(prep.t_s / dt).astype(int) - 1, 0, None)
+    out = []
+    for k in tqdm(range(n), disable=not progress, file=sys.stderr, desc="null re-simulation", unit="run"):
+        s = copy.copy(scn)
+        s.settings = copy.deepcopy(scn.settings)
+        s.settings["scenario"].update(duration_s=float(prep.t_s[-1]), output_rate_Hz=1.0 / dt, seed=int(seed + k),
+                                      fidelity="envelope")
+        s.settings["initial"]["state"] = "steady"
+        s.device = device
+        s.device_nominal = scn.device_nominal
+        s.effects = {}
+        s.temperature = PiecewiseProfile(tp, Tp, [])
+        s.rate = PiecewiseProfile(tp, rp, [])
+        res = run_envelope(s, progress=False, log=lambda m: None)
+        i = np.clip(idx, 0, len(res.time_s) - 1)
+        out.append({c: np.asarray(res[c])[i] for c in CHANNELS})
+    return out
+
+
+def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mask_b: np.ndarray | None = None,
+                   mask_s: np.ndarray | None = None) -> dict:
+    """The localisation statistics of one residual (measured or null).
+
+    Parameters
+    ----------
+    prep : Prepared
+    Zb : ndarray, shape (n_blocks, C)
+        Normalised block residuals.
+    rate_res_dps : ndarray
+        Full-rate rate residual (deg/s), NaN where missing.
+    mask_b, mask_s : ndarray of bool, optional
+        Restrict to these blocks / samples.
+
+    Returns
+    -------
+    dict
+        ``{group: {name: value}}`` with groups ``channels``, ``allan_bands``, ``regimes``.
+    """
+    mb = np.ones(prep.n_blocks, bool) if mask_b is None else mask_b
+    out = {"channels": {}, "allan_bands": {}, "regimes": {}}
+    for i, c in enumerate(CHANNELS):
+        if c in prep.channels:
+            out["channels"][c] = float(np.nanmean(Zb[mb, i] ** 2))
+    for r in REGIMES:
+        m = mb & prep.block_regime(r)
+        if m.sum() >= 5:
+            out["regimes"][r] = float(np.nanmean(Zb[m, IRATE] ** 2))
+    # heating minus cooling at matched temperature (rate and quadrature)
+    heat, cool = mb & prep.block_regime("heating"), mb & prep.block_regime("cooling")
+    if heat.sum() >= 5 and cool.sum() >= 5:
+        T = prep.block_mean(prep.case_C)
+        bins = np.arange(np.floor(np.nanmin(T)), np.nanmax(T) + 5, 5.0)
+        for i, c in ((IRATE, "rate_V"), (IQUAD, "quadrature_V")):
+            if c not in prep.channels:
+                continue
+            d = []
+            for a, b in zip(bins[:-1], bins[1:]):
+                h = heat & (T >= a) & (T < b)
+                k = cool & (T >= a) & (T < b)
+                if h.sum() >= 2 and k.sum() >= 2:
+                    d.append(np.nanmean(Zb[h, i]) - np.nanmean(Zb[k, i]))
+            if d:
+                out["regimes"][f"heating_minus_cooling_{c}"] = float(np.mean(np.square(d)))
+    x = rate_res_dps if mask_s is None else rate_res_dps[mask_s]
+    x = np.nan_to_num(x - np.nanmean(x))
+    fs = 1.0 / prep.sample_interval_s
+    if len(x) > 100:
+        ad = allan_deviation(x, fs)
+        taus, adev = np.asarray(ad.taus_s), np.asarray(ad.adev)
+        span = len(x) / fs
+        for b, (lo, hi) in ALLAN_BANDS.items():
+            m = (taus >= max(lo, 1.5 / fs)) & (taus <= min(hi, span / 10)) & np.isfinite(adev) & (adev > 0)
+            if m.any():
+                out["allan_bands"][b] = float(np.mean(np.log(adev[m])))
+        out["_allan"] = (taus, adev)
+    return out
+
+
+def compare(measured: dict, nulls: list[dict], alpha: float = ALPHA) -> dict:
+    """p-values of the measured statistics against the null replicates, with Holm's correction.
+
+    Parameters
+    ----------
+    measured : dict
+    nulls : list of dict
+    alpha : float, optional
+
+    Returns
+    -------
+    dict
+        ``{group: {name: {value, null_mean, null_sd, z, p, p_holm, significant}}}``.
+    """
+    rows = []
+    for g in ("channels", "allan_bands", "regimes"):
+        for name, v in measured[g].items():
+            ref = np.array([n[g].get(name, np.nan) for n in nulls])
+            ref = ref[np.isfinite(ref)]
+            if len(ref) < 2:
+                continue
+            logs = g != "allan_bands"  # Allan stats are already logs
+            mv = np.log(max(v, 1e-300)) if logs else v
+            rv = np.log(np.maximum(ref, 1e-300)) if logs else ref
+            mu, sd = float(np.mean(rv)), float(np.std(rv, ddof=1))
+            sd = max(sd, 0.05)
+            z = (mv - mu) / (sd * np.sqrt(1 + 1 / len(rv)))
+            p = float(stats.t.sf(z, df=len(rv) - 1))
+            rows.append((g, name, v, mu, sd, z, p))
+    # Holm
+    order = np.argsort([r[6] for r in rows])
+    m = len(rows)
+    holm = np.ones(m)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * rows[i][6]))
+        holm[i] = running
+    out = {"channels": {}, "allan_bands": {}, "regimes": {}}
+    for i, (g, name, v, mu, sd, z, p) in enumerate(rows):
+        out[g][name] = {"value": float(v), "null_mean": float(np.exp(mu) if g != "allan_bands" else np.exp(mu)),
+                        "z": float(z), "p": p, "p_holm": float(holm[i]), "significant": bool(holm[i] < alpha)}
+    return out
+
+
+def significant(loc: dict) -> list[tuple[str, str, float]]:
+    """Significant statistics, most significant first.
+
+    Parameters
+    ----------
+    loc : dict
+        From :func:`compare`.
+
+    Returns
+    -------
+    list of (group, name, p_holm)
+    """
+    s = [(g, n, d["p_holm"]) for g in ("channels", "allan_bands", "regimes") for n, d in loc[g].items()
+         if d["significant"]]
+    return sorted(s, key=lambda r: r[2])

@@ -1,0 +1,317 @@
+"""The whole diagnosis of one record: checks, calibration, localisation, attribution, gap shrink.
+
+:func:`diagnose` returns the report of CONTRACTS.md section 4 (plus details); :mod:`.report`
+writes it as JSON and Markdown and :mod:`.plots` draws the figures.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+from ..averaged import scale_factor_V_per_dps
+from ..diagram import build_diagram
+from ..effects import MODELS
+from ..errors import InputError
+from ..record import Record, read_record
+from ..scenario import Scenario, load_scenario
+from . import localize as loc
+from .attribute import Scorer, ambiguity, attribute, separating_experiment
+from .calibrate import calibrate
+from .data import Prepared, prepare
+from .fitting import Fitter
+from .forward import CHANNELS, IRATE
+from .noise_effects import (FLICKER_Z_HELDOUT, FLICKER_Z_TRAIN, band_excess, flicker_level,
+                            quantization_candidate)
+
+#: Null re-simulations (each a full envelope run on the record's inputs).
+N_NULL = 6
+#: Expected white rate noise of the nominal device (deg/s per sqrt(Hz)) per V/sqrt(Hz) of sense input noise:
+#: ARW 1.66 deg/sqrt(h) = 0.0277 deg/s/sqrt(Hz) at 1.07 uV/sqrt(Hz) (device file calibration).
+_ARW_PER_VNOISE = 0.0277 / 1.07e-6
+
+
+def check_units(rec: Record, prep: Prepared, scn: Scenario, nominal_pred: np.ndarray) -> None:
+    """Refuse a record whose magnitudes do not match the scenario's device (e.g. a rate 1000x off).
+
+    Parameters
+    ----------
+    rec : Record
+    prep : Prepared
+    scn : Scenario
+    nominal_pred : ndarray, shape (n_blocks, C)
+        Nominal forward prediction.
+
+    Raises
+    ------
+    InputError
+    """
+    name = rec.path or "record"
+    sf = prep.sf_nominal_V_per_dps
+    r = np.asarray(rec["rate_dps"], dtype=float)
+    if "rate_V" in rec.columns and np.isfinite(rec["rate_V"]).any():
+        v = np.asarray(rec["rate_V"], dtype=float)
+        ok = np.isfinite(r) & np.isfinite(v) & (np.abs(r) > 1e-9)
+        if ok.sum() > 10:
+            ratio = float(np.median(v[ok] / r[ok]))
+            if not (sf / 30 < abs(ratio) < sf * 30):
+                raise InputError(f"rate_V / rate_dps = {ratio:.4g} V per deg/s, but the scenario's device has a "
+                                 f"nominal scale factor of {sf:.4g} V per deg/s: rate_dps is in the wrong unit "
+                                 f"(about {sf / ratio:.3g}x off)", f"{name}: rate_dps")
+    d = np.diff(r)
+    d = d[np.isfinite(d)]
+    noise = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2) if d.size else 0.0
+    vn = scn.device.values["noise"]["sense_input_V_per_sqrtHz"]
+    expected = _ARW_PER_VNOISE * vn / np.sqrt(prep.sample_interval_s)
+    rate_true = prep.rate_true_dps
+    bias = float(np.nanmedian(r - rate_true))
+    pred_bias = nominal_pred[:, IRATE] / sf
+    scale = float(np.nanmax(np.abs(pred_bias))) + 1.0
+    if expected > 0 and noise > 0 and not (expected / 30 < noise < expected * 30) and abs(bias) > 30 * scale:
+        raise InputError(f"rate_dps noise {noise:.3g} deg/s per sample and bias {bias:.4g} deg/s do not match the "
+                         f"scenario's device (expected about {expected:.3g} deg/s and |bias| < {scale:.3g} deg/s): "
+                         f"about {noise / expected:.3g}x off; is the rate in deg/s?", f"{name}: rate_dps")
+    if abs(bias) > 1000 * scale:
+        raise InputError(f"rate_dps bias {bias:.4g} deg/s is {abs(bias) / scale:.3g}x the device's scale; "
+                         "is the rate in deg/s?", f"{name}: rate_dps")
+    for c, lo_abs in (("quadrature_V", 1e-3), ("agc_effort_V", 1e-3), ("drive_amplitude_V", 1e-3)):
+        if c in prep.channels:
+            i = CHANNELS.index(c)
+            m = float(np.nanmedian(np.abs(prep.obs[c])))
+            p = float(np.nanmedian(np.abs(nominal_pred[:, i])))
+            if p > lo_abs and not (p / 30 < m < p * 30):
+                raise InputError(f"median |{c}| = {m:.4g} but the scenario's device gives about {p:.4g} "
+                                 f"({m / max(p, 1e-30):.3g}x off): wrong unit or wrong device", f"{name}: {c}")
+
+
+def _metrics(prep: Prepared, fitter: Fitter, pred: np.ndarray, mask: np.ndarray) -> dict:
+    """Mean-square block residuals per metric on the blocks in ``mask``."""
+    R = fitter.Y - pred
+    out = {}
+    sf = prep.sf_nominal_V_per_dps
+    for i, c in enumerate(CHANNELS):
+        if c not in prep.channels:
+            continue
+        k = "rms_rate_dps" if c == "rate_V" else f"rms_{c}"
+        x = R[mask, i] / (sf if c == "rate_V" else 1.0)
+        out[k] = float(np.nanmean(x ** 2))
+    for r in ("hold", "heating", "cooling"):
+        m = mask & prep.block_regime(r)
+        if m.sum() >= 3:
+            out[f"rms_rate_dps_{r}"] = float(np.nanmean((R[m, IRATE] / sf) ** 2))
+    return out
+
+
+def _gaps(ms: dict, noise: dict) -> dict:
+    return {k: max(0.0, v - noise.get(k, 0.0)) for k, v in ms.items()}
+
+
+def _shrink(before: dict, after: dict) -> dict:
+    out = {}
+    for k, b in before.items():
+        a = after.get(k, np.nan)
+        out[k] = float(1.0 - a / b) if b > 0 else None
+    return out
+
+
+def _null_noise_model(null_Z: list) -> list:
+    """AR(1) parameters per channel pooled over the null replicates (s floored at 0.05)."""
+    from .likelihood import ar1_fit
+    out = []
+    for c in range(null_Z[0].shape[1]):
+        fits = [ar1_fit(Z[:, c]) for Z in null_Z if np.isfinite(Z[:, c]).sum() > 3]
+        if not fits:
+            out.append(None)
+            continue
+        rho = float(np.mean([f[0] for f in fits]))
+        s = float(np.sqrt(np.mean([f[1] ** 2 for f in fits])))
+        out.append((rho, max(s, 0.05)))
+    return out
+
+
+def _rate_residual(prep: Prepared, pred_b: np.ndarray, rate_V: np.ndarray) -> np.ndarray:
+    tb = prep.block_time_s()
+    return (rate_V - np.interp(prep.t_mid_s, tb, pred_b[:, IRATE])) / prep.sf_nominal_V_per_dps
+
+
+def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, progress: bool | None = None,
+             log=None) -> dict:
+    """Diagnose the sim-to-real gap of a record against a nominal scenario.
+
+    Parameters
+    ----------
+    record_path : path-like
+        Record (CONTRACTS.md section 2).
+    scenario_path : path-like
+        Nominal scenario: device, circuit and noise (time, temperature and rate come from the record).
+    n_null : int, optional
+        Null re-simulations.
+    seed : int, optional
+        Seed of the null re-simulations.
+    progress : bool, optional
+        Progress bars on stderr.
+    log : callable, optional
+
+    Returns
+    -------
+    dict
+        The report (CONTRACTS.md section 4 and more); private arrays for the plots under ``"_plot"``.
+
+    Raises
+    ------
+    InputError
+        Bad record or scenario.
+    """
+    log = log or (lambda m: sys.stderr.write(m + "\n"))
+    wall0 = time.perf_counter()
+    scn = load_scenario(scenario_path)
+    rec = read_record(record_path)
+    sf = scale_factor_V_per_dps(build_diagram(scn.device_nominal, scn.device_nominal.reference_temperature_C))
+    prep = prepare(rec, sf)
+    fitter = Fitter(prep, scn.device_nominal)
+    nominal_pred = fitter.table({}).evaluate(fitter.path(None)["die_b"], fitter.rate_b)
+    check_units(rec, prep, scn, nominal_pred)
+    show = progress if progress is not None else prep.duration_s > 4 * 3600
+    # 1. calibration on the training window
+    folds = prep.folds()
+    train = folds[-1]["train"]
+    cal = calibrate(fitter, train)
+    pred_cal = cal.lin.predict(cal.solution.x)
+    # 2. the null: the calibrated nominal model re-simulated with its noise on the record's inputs
+    nulls = loc.null_records(scn, fitter.device(cal.theta), prep, n_null, seed, progress=show)
+    ho_b = np.zeros(prep.n_blocks, bool)
+    for fd in folds:
+        ho_b |= fd["test"]
+    ho_s = prep.heldout_mask_samples()
+    Z_meas = fitter.normalized_residual(pred_cal)
+    rr_meas = _rate_residual(prep, pred_cal, prep.obs["rate_V"])
+    st_meas = loc.residual_stats(prep, Z_meas, rr_meas)
+    st_null, null_ms, null_ho_allan, null_tr_allan, null_Z = [], [], [], [], []
+    for nr in nulls:
+        Yn = np.column_stack([prep.block_mean(nr[c]) for c in CHANNELS])
+        Zn = (Yn - pred_cal) / fitter.S
+        Zn[:, ~fitter.present] = np.nan
+        null_Z.append(Zn)
+        rr = _rate_residual(prep, pred_cal, nr["rate_V"])
+        st_null.append(loc.residual_stats(prep, Zn, rr))
+        saved = fitter.Y
+        fitter.Y = Yn
+        null_ms.append(_metrics(prep, fitter, pred_cal, ho_b))
+        fitter.Y = saved
+        null_ho_allan.append(loc.residual_stats(prep, Zn, rr, ho_b, ho_s).get("_allan", (None, np.array([])))[1])
+        null_tr_allan.append(loc.residual_stats(prep, Zn, rr, ~ho_b, ~ho_s).get("_allan", (None, np.array([])))[1])
+    noise_params = _null_noise_model(null_Z) if null_Z else None
+    # 3. attribution (deterministic effects), scored with the null's noise model
+    scorer = Scorer(fitter, cal, noise_params)
+    att = attribute(scorer, progress=show)
+    noise_ms = {k: float(np.mean([m[k] for m in null_ms if k in m])) for k in null_ms[0]} if null_ms else {}
+    localization = loc.compare(st_meas, st_null)
+    sig = loc.significant(localization)
+    # 4. gap before/after per metric on held-out data
+    nominal_ho = scorer.nominal["heldout"]
+    before = _gaps(_metrics(prep, fitter, nominal_ho, ho_b), noise_ms)
+    primary = max((k for k in before if not k.startswith("rms_rate_dps_")),
+                  key=lambda k: before[k] / max(noise_ms.get(k, 1e-300), 1e-300))
+    ranked = []
+    for name, ev in att["single"].items():
+        if ev["fit"] is None:
+            ranked.append({"effect": name, "params": {}, "gap_before": float(np.sqrt(before[primary])),
+                           "gap_after": None, "shrink": None, "metric": primary, "accepted": False,
+                           "heldout_gain": None, "error": ev.get("error")})
+            continue
+        after = _gaps(_metrics(prep, fitter, ev["preds"]["heldout"], ho_b), noise_ms)
+        ranked.append(_row(name, ev, before, after, primary))
+    # noise-level effects
+    final_pred_ho = att["final"]["preds"]["heldout"] if att["final"] else nominal_ho
+    final_pred_tr = att["final"]["fit"]._ctx["pred"] if att["final"] else pred_cal
+    rr_final = _rate_residual(prep, np.where(np.isfinite(final_pred_ho), final_pred_ho, final_pred_tr),
+                              prep.obs["rate_V"])
+    meas_ho_allan = loc.residual_stats(prep, Z_meas, rr_final, ho_b, ho_s).get("_allan", (np.array([]), np.array([])))
+    meas_tr_allan = loc.residual_stats(prep, Z_meas, rr_final, ~ho_b, ~ho_s).get("_allan", (np.array([]), np.array([])))
+    noise_accepted = []
+    q = quantization_candidate(prep, scn.device.values["noise"]["quantization_lsb_V"])
+    ranked.append({"effect": "quantization", "params": {"lsb_V": q["lsb_V"]} if q else {"lsb_V": 0.0},
+                   "gap_before": None, "gap_after": None, "shrink": 1.0 if q else None,
+                   "metric": "rate_V lattice spacing", "accepted": bool(q), "heldout_gain": None,
+                   "detail": {"on_lattice": q["on_lattice"]} if q else {}})
+    if q:
+        noise_accepted.append("quantization")
+    ex_ho, z_ho = band_excess(meas_ho_allan[0], meas_ho_allan[1], null_ho_allan)
+    ex_tr, z_tr = band_excess(meas_tr_allan[0], meas_tr_allan[1], null_tr_allan)
+    flick_ok = bool(z_ho > FLICKER_Z_HELDOUT and z_tr > FLICKER_Z_TRAIN and not q)
+    g_before = max(ex_ho, 0.0)
+    g_after = abs(ex_ho - max(ex_tr, 0.0))
+    ranked.append({"effect": "flicker_noise", "params": {"h_phase_rad2": 0.0, "h_output_dps2": flicker_level(ex_tr)},
+                   "gap_before": float(np.sqrt(g_before)), "gap_after": float(np.sqrt(g_after)),
+                   "shrink": float(1 - g_after / g_before) if g_before > 0 else None,
+                   "metric": "allan_flicker_band_dps", "accepted": flick_ok, "heldout_gain": None,
+                   "detail": {"z_heldout": z_ho, "z_train": z_tr,
+                              "not_identifiable": ["h_phase_rad2 (phase vs output flicker split)"]}})
+    if flick_ok:
+        noise_accepted.append("flicker_noise")
+    accepted = (["quantization"] if q else []) + att["selected"] + (["flicker_noise"] if flick_ok else [])
+    accepted = accepted[:2]
+    # ambiguity sets and separating experiments
+    amb, experiments = {}, {}
+    for a in att["selected"]:
+        others = ambiguity(att["single"], a) if a == att["selected"][0] else []
+        others = [o for o in others if o not in accepted]
+        if others:
+            amb[a] = others
+            experiments[a] = {o: separating_experiment(a, o) for o in others}
+    # combined model
+    combined = None
+    if att["final"]:
+        after = _gaps(_metrics(prep, fitter, att["final"]["preds"]["heldout"], ho_b), noise_ms)
+        combined = {"effects": att["selected"], "params": att["final"]["fit"].effects,
+                    "gap_before": {k: float(np.sqrt(v)) for k, v in before.items()},
+                    "gap_after": {k: float(np.sqrt(v)) for k, v in after.items()},
+                    "shrink": _shrink(before, after)}
+    if not accepted:
+        verdict = "unexplained" if sig else "none"
+    else:
+        verdict = "ambiguous" if amb else "explained"
+    remainder = None
+    if sig and not accepted:
+        remainder = {"significant": [{"group": g, "name": n, "p_holm": p} for g, n, p in sig]}
+    order = {n: i for i, n in enumerate(accepted)}
+    ranked.sort(key=lambda r: (0 if r["accepted"] else 1, order.get(r["effect"], 99),
+                               -(r["heldout_gain"] if r["heldout_gain"] is not None else -1e300)))
+    for r in ranked:
+        r["accepted"] = r["effect"] in accepted
+    report = {
+        "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
+        "localization": localization, "separating_experiments": experiments, "remainder": remainder,
+        "primary_metric": primary, "combined": combined,
+        "calibration": cal.to_json(),
+        "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,
+                   "sample_interval_s": prep.sample_interval_s, "channels": list(prep.channels),
+                   "issues": prep.issues,
+                   "folds": [{"test_start_s": f["test_start_s"], "test_end_s": f["test_end_s"],
+                              "train_blocks": int(f["train"].sum()), "test_blocks": int(f["test"].sum())}
+                             for f in folds]},
+        "settings": {"null_runs": n_null, "seed": seed, "block_s": float(np.median(np.diff(prep.block_time_s()))),
+                     "delta_bic_max": -10.0, "alpha_holm": loc.ALPHA},
+        "wall_time_s": time.perf_counter() - wall0,
+    }
+    report["_plot"] = dict(prep=prep, fitter=fitter, pred_cal=pred_cal, nominal_ho=nominal_ho,
+                           final_ho=att["final"]["preds"]["heldout"] if att["final"] else None,
+                           final_tr=final_pred_tr, st_meas=st_meas, st_null=st_null, meas_ho_allan=meas_ho_allan,
+                           null_ho_allan=null_ho_allan, before=before,
+                           after=(combined or {}).get("gap_after"), ho_b=ho_b)
+    return report
+
+
+def _row(name: str, ev: dict, before: dict, after: dict, primary: str) -> dict:
+    mf = ev["fit"]
+    sh = _shrink(before, after)
+    return {"effect": name, "params": mf.effects[name], "param_sd": mf.sd.get(name, {}),
+            "gap_before": float(np.sqrt(before[primary])), "gap_after": float(np.sqrt(after.get(primary, 0.0))),
+            "shrink": sh.get(primary), "metric": primary, "accepted": ev["accepted"],
+            "heldout_gain": ev["gain"]["gain"], "heldout_gain_ci": ev["gain"]["ci"],
+            "folds_passed": ev["gain"]["folds_passed"], "delta_bic": ev["delta_bic"], "in_bounds": ev["in_bounds"],
+            "param_significant": ev["param_significant"],
+            "nominal_shift": {k: float(v - ev["fit"].theta.get(k, 0.0)) for k, v in {}.items()},
+            "shrink_by_metric": sh}

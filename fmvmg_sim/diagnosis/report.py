@@ -1,0 +1,122 @@
+"""The diagnosis report as JSON (CONTRACTS.md section 4) and Markdown."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from ..record import atomic_write_text
+
+
+def clean(obj):
+    """JSON-safe copy: NaN/inf to None, numpy scalars to Python, private keys dropped.
+
+    Parameters
+    ----------
+    obj : object
+
+    Returns
+    -------
+    object
+    """
+    if isinstance(obj, dict):
+        return {str(k): clean(v) for k, v in obj.items() if not str(k).startswith("_")}
+    if isinstance(obj, (list, tuple)):
+        return [clean(v) for v in obj]
+    if hasattr(obj, "item") and not isinstance(obj, (list, dict)):
+        try:
+            obj = obj.item()
+        except (ValueError, AttributeError):
+            return None
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, (str, int, float, bool)) or obj is None:
+        return obj
+    return str(obj)
+
+
+def _fmt(v, spec=".4g"):
+    return "-" if v is None else format(v, spec) if isinstance(v, (int, float)) else str(v)
+
+
+def markdown(rep: dict) -> str:
+    """A report a person reads.
+
+    Parameters
+    ----------
+    rep : dict
+
+    Returns
+    -------
+    str
+    """
+    L = [f"# Sim-to-real gap diagnosis: {rep['record']['path']}", "",
+         f"**Verdict: {rep['verdict']}**" + (f" - accepted: {', '.join(rep['accepted'])}" if rep["accepted"] else ""), ""]
+    if rep["ambiguous_with"]:
+        L.append("## Ambiguity")
+        for a, others in rep["ambiguous_with"].items():
+            for o in others:
+                L.append(f"- **{a}** vs **{o}**: {rep['separating_experiments'].get(a, {}).get(o, '')}")
+        L.append("")
+    if rep.get("remainder"):
+        L += ["## Unexplained remainder", ""]
+        for s in rep["remainder"]["significant"][:8]:
+            L.append(f"- {s['group']} / {s['name']} (Holm p = {s['p_holm']:.2g})")
+        L.append("")
+    r = rep["record"]
+    L += ["## Record", "", f"{r['samples']} samples, {r['duration_s'] / 3600:.2f} h at {r['sample_interval_s']:.3g} s; "
+          f"channels: {', '.join(r['channels'])}.", ""]
+    iss = r["issues"]
+    if iss.get("gaps") or iss.get("nan_samples"):
+        L.append(f"Gaps: {len(iss.get('gaps', []))} ({iss.get('gap_total_s', 0):.0f} s missing); "
+                 f"NaN samples: {iss.get('nan_samples', {})} (bridged for the model inputs, skipped in the fits).")
+        L.append("")
+    L += ["## 1. Calibration (training window)", "", "| parameter | value | sd | tolerance | identifiable |",
+          "|---|---|---|---|---|"]
+    for k, v in rep["calibration"]["parameters"].items():
+        L.append(f"| {k} | {v['value']:.4g} | {v['sd']:.2g} | {v['tolerance']:.3g} | {'yes' if v['identifiable'] else 'no'} |")
+    L += ["", "## 2. Where the gap lies (against the re-simulated null, Holm-corrected)", "",
+          "| group | statistic | z | p (Holm) | significant |", "|---|---|---|---|---|"]
+    for g in ("channels", "allan_bands", "regimes"):
+        for n, d in rep["localization"][g].items():
+            L.append(f"| {g} | {n} | {d['z']:.2f} | {d['p_holm']:.2g} | {'**yes**' if d['significant'] else 'no'} |")
+    L += ["", "## 3. Attribution (held-out, forward-chained)", "",
+          "| effect | accepted | params | held-out gain [CI] | folds | dBIC | gap before | after | shrink |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for row in rep["ranked"]:
+        ps = ", ".join(f"{k}={_fmt(v)}" for k, v in (row.get("params") or {}).items())
+        ci = row.get("heldout_gain_ci")
+        g = f"{_fmt(row.get('heldout_gain'))} [{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "-"
+        L.append(f"| {row['effect']} | {'**yes**' if row['accepted'] else 'no'} | {ps} | {g} | "
+                 f"{_fmt(row.get('folds_passed'))} | {_fmt(row.get('delta_bic'), '.3g')} | {_fmt(row.get('gap_before'))} | "
+                 f"{_fmt(row.get('gap_after'))} | {_fmt(row.get('shrink'), '.3f')} |")
+    c = rep.get("combined")
+    if c:
+        L += ["", f"## 4. Gap before and after ({' + '.join(c['effects'])}), held-out data", "",
+              "| metric | gap before | gap after | shrink |", "|---|---|---|---|"]
+        for k, b in c["gap_before"].items():
+            L.append(f"| {k} | {b:.4g} | {c['gap_after'].get(k, float('nan')):.4g} | {_fmt(c['shrink'].get(k), '.3f')} |")
+    L += ["", "Gaps are the excess RMS over the null's noise, sqrt(max(0, MSE - noise)); shrink = 1 - G_after/G_before "
+          "on the mean-square excess.", ""]
+    return "\n".join(L)
+
+
+def write_report(rep: dict, out: Path) -> dict:
+    """Write ``report.json`` and ``report.md`` into ``out``.
+
+    Parameters
+    ----------
+    rep : dict
+    out : Path
+
+    Returns
+    -------
+    dict
+        The JSON-clean report.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    cj = clean(rep)
+    atomic_write_text(out / "report.json", json.dumps(cj, indent=2) + "\n")
+    atomic_write_text(out / "report.md", markdown(cj))
+    return cj

@@ -1,0 +1,66 @@
+"""Shared helpers of the diagnosis tests: short simulated oven records with effects withheld."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fmvmg_sim.envelope.engine import run_envelope
+from fmvmg_sim.record import write_record
+from fmvmg_sim.scenario import load_scenario
+
+REPO = Path(__file__).resolve().parents[1]
+NOMINAL = REPO / "scenarios" / "nominal_a.toml"
+
+#: ~2.9 h oven: hold, cool at 1 K/min, hold, heat at 1 K/min, hold.
+OVEN = """
+[temperature]
+start_C = 25.0
+segments = [
+  { hold_s = 1200.0 },
+  { ramp_to_C = -10.0, rate_C_per_min = 1.0 },
+  { hold_s = 1800.0 },
+  { ramp_to_C = 50.0, rate_C_per_min = 1.0 },
+  { hold_s = 1800.0 },
+]
+"""
+
+
+def oven_record(tmp: Path, name: str, effects: dict | None = None, seed: int = 1, rate_Hz: float = 1.0,
+                noise: bool = True, theta: dict | None = None):
+    """Simulate the short oven profile with ``effects`` and write ``tmp/name.csv``.
+
+    Returns
+    -------
+    (Path, SimResult)
+    """
+    body = f"""
+[scenario]
+name = "{name}"
+device_file = "{REPO / 'scenarios' / 'devices' / 'fmvmg_a.toml'}"
+duration_s = 10500.0
+output_rate_Hz = {rate_Hz}
+seed = {seed}
+fidelity = "envelope"
+[initial]
+state = "steady"
+[noise]
+brownian = {str(noise).lower()}
+electronic = {str(noise).lower()}
+flicker = {str(noise).lower()}
+quantization = {str(noise).lower()}
+rate_random_walk = {str(noise).lower()}
+""" + OVEN
+    if effects:
+        body += "[effects]\n" + "".join(
+            f"{n} = {{ " + ", ".join(f"{k} = {v!r}" for k, v in ps.items()) + " }\n" for n, ps in effects.items())
+    p = tmp / f"{name}.toml"
+    p.write_text(body)
+    scn = load_scenario(p)
+    if theta:
+        from fmvmg_sim.diagnosis.parameters import apply_nominal
+        from fmvmg_sim.effects import EffectSet
+        scn.device = EffectSet(scn.effects).apply_to_device(apply_nominal(scn.device_nominal, theta))
+    res = run_envelope(scn, progress=False)
+    rec = tmp / f"{name}.csv"
+    write_record(rec, res.to_record())
+    return rec, res
