@@ -26,7 +26,8 @@ from tqdm import tqdm
 from ..effects import MODELS
 from .calibrate import Calibration
 from .fitting import DEVICE_EFFECTS, PATH_EFFECTS, Fitter
-from .likelihood import block_bootstrap_ci, fit_params, nll
+from .forward import CHANNELS
+from .likelihood import block_bootstrap_ci, fit_params, nll, nll_by_channel
 from .model import NONLINEAR, EffectModel, ModelFit
 
 DELTA_BIC_MAX = -10.0
@@ -81,8 +82,10 @@ class Scorer:
     fitter : Fitter
     cal : Calibration
     noise_params : list of (rho, s), optional
-        AR(1) noise model of each channel's normalised block residual, from the null re-simulations;
-        without it each model's own training residual sets it (a smooth misfit then looks cheap).
+        AR(1) noise model of each channel's block residual normalised by the scoring sigma
+        (:meth:`~.fitting.Fitter.scoring_residual`: noise plus a per-channel model floor), from the
+        null re-simulations; without it each model's own training residual sets it (a smooth misfit
+        then looks cheap).
     """
 
     def __init__(self, fitter: Fitter, cal: Calibration, noise_params: list | None = None):
@@ -116,6 +119,23 @@ class Scorer:
             ho[fd["test"]] = pred[fd["test"]]
         return {"folds": out, "heldout": ho}
 
+    def channel_noise(self, base_pred: np.ndarray, rows: np.ndarray) -> list:
+        """AR(1) noise model of each channel for scoring candidates against ``base_pred``.
+
+        Parameters
+        ----------
+        base_pred : ndarray, shape (n, C)
+            The baseline's prediction (fitted on ``rows``).
+        rows : ndarray of bool
+            Training blocks.
+
+        Returns
+        -------
+        list of (rho, s) or None
+        """
+        Z = self.f.scoring_residual(base_pred)[rows]
+        return self.noise_params or fit_params(Z)
+
     def gain(self, cand: dict, base: dict) -> dict:
         """Held-out NLL gain per block of ``cand`` over ``base`` (both from :meth:`fold_predictions`).
 
@@ -128,21 +148,25 @@ class Scorer:
         dict
             ``gain``, ``ci``, ``folds`` (per-fold gain and interval), ``folds_passed``.
         """
-        allv, folds = [], []
+        allv, folds, by_ch = [], [], []
         for k, fd in enumerate(self.folds):
             d = []
+            par = self.channel_noise(base["folds"][k][0], fd["train"])
             for pred in (base["folds"][k][0], cand["folds"][k][0]):
-                Z = self.f.normalized_residual(pred)
-                par = self.noise_params or fit_params(Z[fd["train"]])
-                d.append(nll(Z[fd["test"]], par))
-            diff = d[0] - d[1]
+                Z = self.f.scoring_residual(pred)
+                d.append(nll_by_channel(Z[fd["test"]], par))
+            dch = d[0] - d[1]
+            by_ch.append(dch)
+            diff = dch.sum(axis=1)
             lo, hi = block_bootstrap_ci(diff, seed=k)
             folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi]})
             allv.append(diff)
         pooled = np.concatenate(allv)
         lo, hi = block_bootstrap_ci(pooled, seed=99)
+        ch = np.concatenate(by_ch).mean(axis=0)
         return {"gain": float(np.mean(pooled)), "ci": [lo, hi], "folds": folds,
-                "folds_passed": int(sum(f["ci"][0] > 0 for f in folds))}
+                "folds_passed": int(sum(f["ci"][0] > 0 for f in folds)),
+                "by_channel": {c: float(v) for c, v in zip(CHANNELS, ch) if self.f.present[CHANNELS.index(c)]}}
 
     def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int) -> float:
         """BIC(candidate) - BIC(base) on the training window (AR(1) likelihood).
@@ -159,9 +183,9 @@ class Scorer:
         rows = self.train
         v = []
         for pred in (pred_cand, pred_base):
-            Z = self.f.normalized_residual(pred)[rows]
+            Z = self.f.scoring_residual(pred)[rows]
             v.append(float(np.sum(nll(Z, self.noise_params or fit_params(Z)))))
-        n = int(np.isfinite(self.f.normalized_residual(pred_base)[rows]).sum())
+        n = int(np.isfinite(self.f.scoring_residual(pred_base)[rows]).sum())
         return 2 * (v[0] - v[1]) + k_extra * np.log(max(n, 2))
 
 
@@ -227,7 +251,7 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
             "in_bounds": inb, "param_significant": sig, "accepted": acc}
 
 
-def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_pairs: int = 5) -> dict:
+def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_pairs: int = 12) -> dict:
     """Single-effect scan, then forward selection of a second effect.
 
     Parameters
@@ -255,8 +279,9 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
         selected, final = [best], single[best]
         if max_effects > 1:
             fixed = EffectModel(scorer.f, scorer.cal, [best]).fixed_nonlinear(final["fit"].effects)
-            others = sorted((n for n in single if n != best and single[n]["fit"] is not None
-                             and single[n]["gain"]["gain"] > 0),
+            # every other deterministic effect: a second effect's single-effect fit is dominated by the
+            # first one's signature, so its single gain says little about how it does as a second effect
+            others = sorted((n for n in single if n != best and single[n]["fit"] is not None),
                             key=lambda n: -single[n]["gain"]["gain"])[:top_pairs]
             for n in others:
                 if n in NONLINEAR and best in NONLINEAR and n == best:

@@ -112,6 +112,8 @@ class Fitter:
         self._nom_jac_theta = None
         self.table_builds = 0
         self._paths = {}
+        #: Block sigma used to *score* models (model floor included); see :meth:`set_score_floor`.
+        self.S_score = self.S
 
     # ---- devices and tables -------------------------------------------------------------
     def device(self, theta: dict, effects: dict | None = None):
@@ -294,6 +296,46 @@ class Fitter:
         red = cost / max(n - K, 1)
         cov = cov * max(red, 1.0)
         return Solution(x, cov, cost, n)
+
+    def set_score_floor(self, table: ResponseTable, die_b: np.ndarray, die_floor_K: float,
+                        rel_floor: float = 0.0) -> None:
+        """Add a model floor to the scoring sigma of every channel.
+
+        The die temperature of a model with a thermal path (lag, hysteresis) is known to about
+        ``die_floor_K`` only, so every channel carries a floor of its temperature sensitivity times
+        that; a precise channel (the drive frequency, a thermometer to 1e-4 K) then cannot let a tiny
+        systematic misfit buy acceptance. ``rel_floor`` adds a floor proportional to the channel's
+        swing over the record.
+
+        Parameters
+        ----------
+        table : ResponseTable
+            The calibrated nominal model.
+        die_b : ndarray
+            Block die temperatures (the nominal path).
+        die_floor_K : float
+        rel_floor : float, optional
+        """
+        slope = np.abs(table.slope(np.nan_to_num(die_b, nan=float(np.nanmean(die_b)))))
+        y = table.evaluate(np.nan_to_num(die_b, nan=float(np.nanmean(die_b))))
+        swing = np.nanmax(y, axis=0) - np.nanmin(y, axis=0)
+        fl2 = (slope * die_floor_K) ** 2 + (rel_floor * swing[None, :]) ** 2
+        self.S_score = np.sqrt(self.S ** 2 + fl2)
+
+    def scoring_residual(self, pred: np.ndarray) -> np.ndarray:
+        """(observed - predicted) / scoring sigma (model floor included); NaN for absent channels.
+
+        Parameters
+        ----------
+        pred : ndarray, shape (n, C)
+
+        Returns
+        -------
+        ndarray
+        """
+        Z = (self.Y - pred) / self.S_score
+        Z[:, ~self.present] = np.nan
+        return Z
 
     def normalized_residual(self, pred: np.ndarray) -> np.ndarray:
         """(observed - predicted) / sigma per block and channel (NaN for absent channels).

@@ -78,6 +78,25 @@ def nll(Z: np.ndarray, params: list[tuple[float, float]]) -> np.ndarray:
     return out
 
 
+def nll_by_channel(Z: np.ndarray, params: list[tuple[float, float]]) -> np.ndarray:
+    """Per-block NLL of each channel (zero for skipped channels).
+
+    Parameters
+    ----------
+    Z : ndarray, shape (n, C)
+    params : list of (rho, s) or None
+
+    Returns
+    -------
+    ndarray, shape (n, C)
+    """
+    out = np.zeros(Z.shape)
+    for c, p in enumerate(params):
+        if p is not None:
+            out[:, c] = np.nan_to_num(ar1_nll_terms(Z[:, c], *p))
+    return out
+
+
 def fit_params(Z: np.ndarray) -> list:
     """AR(1) parameters of every column with finite data.
 
