@@ -1,0 +1,114 @@
+"""The ``physics`` compensator: auxiliary-channel drift model, fallback, held-out behaviour."""
+
+import numpy as np
+import pytest
+
+from fmvmg_sim.compensation import get_method
+from fmvmg_sim.compensation.evaluate import RunCache, _oven_profiles, default_effects
+from fmvmg_sim.compensation.physics import PhysicsCompensator, PhysicsFallbackWarning
+from fmvmg_sim.compensation.poly import PolyBaseline
+from fmvmg_sim.compensation.synthetic import make_record
+from fmvmg_sim.errors import InputError
+from fmvmg_sim.record import Record
+
+
+def drift_rms_dph(rec, out, block_s=100.0):
+    err = np.asarray(out) - rec["rate_true_dps"]
+    m = int(round(block_s / rec.sample_interval_s()))
+    n = len(err) // m * m
+    return float(np.sqrt(np.mean(err[:n].reshape(-1, m).mean(1) ** 2)) * 3600.0)
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """Quick simulated oven runs (20 Hz, 30 min) with a 120 s case-to-die thermal lag."""
+    cache = RunCache(_oven_profiles(quick=True), default_effects(quick=True))
+    return cache.get("oven_000", 101), cache.get("oven_004", 201)
+
+
+def test_registered():
+    assert get_method("physics") is PhysicsCompensator
+
+
+def test_beats_poly_baseline_held_out_with_thermal_lag(runs):
+    a, b = runs
+    for train, test in ((a, b), (b, a)):
+        raw = drift_rms_dph(test, test["rate_dps"])
+        poly = drift_rms_dph(test, PolyBaseline().fit(train).transform(test))
+        phys_model = PhysicsCompensator().fit(train)
+        phys = drift_rms_dph(test, phys_model.transform(test))
+        assert poly < raw
+        assert phys < 0.5 * poly, (raw, poly, phys)
+        d = phys_model.diagnostics_
+        assert not d["fallback_temperature_only"] and d["die_temperature_source"] == "drive_frequency_Hz"
+        assert "Q" in d["terms"] and "Q*dT_die" in d["terms"]
+        assert d["filter_time_constant_s"] == 0.0
+        # drive frequency falls with die temperature (about -0.92 Hz/K; the lag blurs the fit)
+        assert -1.2 < d["drive_frequency_tc_Hz_per_K"] < -0.5
+
+
+def test_signal_path_untouched(runs):
+    """The output is the input minus a slow correction: no bandwidth is filtered away."""
+    a, b = runs
+    m = PhysicsCompensator().fit(a)
+    corr = b["rate_dps"] - m.transform(b)
+    assert np.std(np.diff(corr)) < 1e-3 * np.std(np.diff(b["rate_dps"]))
+    np.testing.assert_allclose(corr, m.drift(b))
+
+
+def test_agc_auto_drops_collinear_term(runs):
+    m = PhysicsCompensator(use_agc="auto").fit(runs[0])
+    # in the default device the damping is a function of temperature alone
+    assert m.diagnostics_["agc_r2_on_die_temperature"] > 0.999
+    assert "A_agc" not in m.diagnostics_["terms"]
+    forced = PhysicsCompensator(use_agc=True).fit(runs[0])
+    assert "A_agc" in forced.diagnostics_["terms"]
+    with pytest.raises(ValueError):
+        PhysicsCompensator(use_agc="maybe").fit(runs[0])
+
+
+def test_fallback_without_auxiliary_channels():
+    train = make_record(duration_s=3600, fs_Hz=10.0, profile="heating", seed=1)
+    test = make_record(duration_s=3600, fs_Hz=10.0, profile="heating", seed=2)
+    with pytest.warns(PhysicsFallbackWarning, match="temperature-only"):
+        m = PhysicsCompensator().fit(train)
+    assert m.diagnostics_["fallback_temperature_only"] is True
+    assert m.diagnostics_["terms"] == ["1", "dT_case", "dT_case^2", "dTdt_case_C_per_min"]
+    out = m.transform(test)
+    assert drift_rms_dph(test, out) < 0.5 * drift_rms_dph(test, test["rate_dps"])
+
+
+def test_partial_channels_warn_and_drop_terms(runs):
+    a, b = runs
+    cols = {k: v for k, v in a.columns.items() if k != "drive_frequency_Hz"}
+    with pytest.warns(PhysicsFallbackWarning, match="drive_frequency_Hz"):
+        m = PhysicsCompensator().fit(Record(cols))
+    assert m.diagnostics_["die_temperature_source"] == "temperature_C"
+    assert m.diagnostics_["fallback_temperature_only"] is False
+    assert m.transform(b).shape == (len(b),)
+
+
+def test_transform_needs_the_fitted_channels(runs):
+    a, b = runs
+    m = PhysicsCompensator().fit(a)
+    cols = {k: v for k, v in b.columns.items() if k != "quadrature_V"}
+    with pytest.raises(InputError, match="quadrature_V"):
+        m.transform(Record(cols))
+
+
+def test_handles_gaps(runs):
+    a, b = runs
+    keep = np.ones(len(b), bool)
+    keep[5000:7000] = False
+    m = PhysicsCompensator().fit(a.slice(keep))
+    out = m.transform(b.slice(keep))
+    assert out.shape == (keep.sum(),) and np.isfinite(out).all()
+
+
+def test_bad_input():
+    rec = make_record(duration_s=60, fs_Hz=10.0, seed=0)
+    T = rec["temperature_C"].copy()
+    T[10] = np.nan
+    cols = dict(rec.columns, temperature_C=T)
+    with pytest.raises(InputError, match="NaN"):
+        PhysicsCompensator().fit(Record(cols))
