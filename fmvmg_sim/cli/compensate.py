@@ -18,7 +18,7 @@ import numpy as np
 
 from ..record import Record, atomic_write_text, read_record, write_record
 
-METHOD_NAMES = ("emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "poly-baseline")
+METHOD_NAMES = ("emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "poly-baseline", "physics")
 
 
 def _uniform_stretch(t_s: np.ndarray) -> slice:
