@@ -196,6 +196,7 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=None)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--synthetic", action="store_true", help="a synthetic record instead of the simulated oven_004")
+    ap.add_argument("--method", default="emd-rbf-ga-kf", help="the method to time (default emd-rbf-ga-kf)")
     a = ap.parse_args()
     if a.emd_choice:
         res = emd_choice()
@@ -204,7 +205,7 @@ def main() -> None:
     elif a.holdout:
         res = holdout(a.hours or 2.0)
     else:
-        res = pipeline(a.hours or 13.0, synthetic=a.synthetic)
+        res = pipeline(a.hours or 13.0, method=a.method, synthetic=a.synthetic)
     print(json.dumps(res) if a.json else json.dumps(res, indent=1))
 
 
