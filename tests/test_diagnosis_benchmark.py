@@ -2,6 +2,8 @@
 
 import json
 
+import numpy as np
+
 from fmvmg_sim.cli.main import main
 
 
@@ -17,3 +19,7 @@ def test_tiny_benchmark(tmp_path, capsys):
     # labels live apart from the records the diagnoser reads
     assert len(list((out / "labels").glob("*.json"))) == 2 and len(list((out / "cases").glob("*.csv"))) == 2
     assert not list((out / "cases").glob("*.json"))
+    # effect amplitudes are scaled to the drawn signature SNR (within 25 %, unless clipped at a bound)
+    for lab in (json.loads(p.read_text()) for p in (out / "labels").glob("*.json")):
+        for n, snr in lab["snr_by_effect"].items():
+            assert abs(np.log(snr / lab["snr_target"])) < np.log(1.3), (n, snr, lab["snr_target"])

@@ -32,6 +32,12 @@ from .model import NONLINEAR, EffectModel, ModelFit
 
 DELTA_BIC_MAX = -10.0
 FOLDS_NEEDED = 2
+#: Candidates (positive held-out gain, none accepted) from which pairs are fitted from scratch.
+PAIR_STARTS = 2
+#: Relative accuracy of an accepted effect's model (a floor on the scoring sigma of a second effect).
+SECOND_EFFECT_REL_FLOOR = 0.01
+#: Temperature span (K) a fold's training window needs to be scored.
+MIN_TRAIN_SPAN_K = 5.0
 DETERMINISTIC = tuple(e for e in MODELS if e in DEVICE_EFFECTS or e in PATH_EFFECTS)
 
 #: What separates look-alike effects (physics brief section 4, diagnosis methods 2.2 step 8).
@@ -93,8 +99,17 @@ class Scorer:
         self.cal = cal
         #: AR(1) noise model per channel, from the re-simulated null (the same for every model)
         self.noise_params = noise_params
-        self.folds = fitter.prep.folds()
-        self.train = self.folds[-1]["train"]
+        folds = fitter.prep.folds()
+        self.train = folds[-1]["train"]
+        # a fold whose training window never left one temperature cannot test a temperature law (its
+        # coefficient is unidentified there and extrapolates arbitrarily): score on the others
+        T = fitter.prep.block_mean(fitter.prep.case_C)
+        span = [float(np.nanmax(T[fd["train"]]) - np.nanmin(T[fd["train"]])) if fd["train"].any() else 0.0
+                for fd in folds]
+        keep = [k for k, sp in enumerate(span) if sp >= MIN_TRAIN_SPAN_K]
+        self.folds = [folds[k] for k in keep] if keep else folds
+        self.dropped_folds = [k for k in range(len(folds)) if k not in keep] if keep else []
+        self.folds_needed = min(FOLDS_NEEDED, len(self.folds))
         # the nominal model on each fold
         self.nominal = self.fold_predictions(lambda rows: (cal.lin.predict(fitter.solve(cal.lin, rows).x), {}))
         self.nominal_train_pred = cal.lin.predict(cal.solution.x)
@@ -214,7 +229,7 @@ def _significant_param(mf: ModelFit, names: list) -> bool:
 
 
 def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarray, fixed: dict | None = None,
-             k_base: int = 0) -> dict:
+             k_base: int = 0, new: list | None = None) -> dict:
     """Fit ``names`` (with ``fixed`` nonlinear parameters) and score it against ``base``.
 
     Parameters
@@ -228,6 +243,9 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
     fixed : dict, optional
     k_base : int, optional
         Parameters of the baseline's effects (for Delta-BIC).
+    new : list of str, optional
+        The effects added to the baseline (default all of ``names``): one of *their* parameters
+        must be significant (the baseline's own effect does not vouch for an added one).
 
     Returns
     -------
@@ -245,8 +263,8 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
     k = sum(len(MODELS[n]) for n in names) - k_base
     dbic = scorer.delta_bic(mf._ctx["pred"], base_pred_train, k)
     inb = _in_bounds(mf.effects)
-    sig = _significant_param(mf, [n for n in names])
-    acc = bool(g["ci"][0] > 0 and g["folds_passed"] >= FOLDS_NEEDED and dbic < DELTA_BIC_MAX and inb and sig)
+    sig = _significant_param(mf, list(new if new is not None else names))
+    acc = bool(g["ci"][0] > 0 and g["folds_passed"] >= scorer.folds_needed and dbic < DELTA_BIC_MAX and inb and sig)
     return {"names": list(names), "fit": mf, "preds": preds, "gain": g, "delta_bic": float(dbic),
             "in_bounds": inb, "param_significant": sig, "accepted": acc}
 
@@ -283,18 +301,46 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
             # first one's signature, so its single gain says little about how it does as a second effect
             others = sorted((n for n in single if n != best and single[n]["fit"] is not None),
                             key=lambda n: -single[n]["gain"]["gain"])[:top_pairs]
+            # the first effect's model is accurate to a fraction of its own signature: that fraction
+            # floors the scoring sigma of a second effect, which must explain more than the first one's
+            # model error (else any leftover misfit of a strong first effect buys a spurious second)
+            saved = scorer.f.S_score
+            sig1 = np.abs(final["fit"]._ctx["pred"] - scorer.nominal_train_pred)
+            scorer.f.S_score = np.sqrt(saved ** 2 + (SECOND_EFFECT_REL_FLOOR * np.nan_to_num(sig1)) ** 2)
             for n in others:
                 if n in NONLINEAR and best in NONLINEAR and n == best:
                     continue
                 # the first effect's nonlinear parameter is refitted unless the second has its own
                 fx = fixed if n in NONLINEAR else {}
                 pair_scan[n] = evaluate(scorer, [best, n], final["preds"], final["fit"]._ctx["pred"], fx,
-                                        k_base=len(MODELS[best]))
+                                        k_base=len(MODELS[best]), new=[n])
+            scorer.f.S_score = saved
             acc2 = [n for n in pair_scan if pair_scan[n]["accepted"]]
             if acc2:
                 second = max(acc2, key=lambda n: pair_scan[n]["gain"]["gain"])
                 selected.append(second)
                 final = pair_scan[second]
+    elif max_effects > 1:
+        # no single effect passes, but a pair may: each alone mis-fits the other's signature (pinned at a
+        # bound, or extrapolating badly); start from the strongest candidates and fit pairs from scratch
+        starts = sorted((n for n in single if single[n]["fit"] is not None and single[n]["gain"]["ci"][0] > 0
+                         and single[n]["gain"]["folds_passed"] >= scorer.folds_needed),
+                        key=lambda n: -single[n]["gain"]["gain"])[:PAIR_STARTS]
+        for a in starts:
+            for n in single:
+                key = "+".join(sorted((a, n)))
+                if n == a or key in pair_scan or (a in NONLINEAR and n in NONLINEAR):
+                    continue
+                pair_scan[key] = evaluate(scorer, sorted((a, n)), base, scorer.nominal_train_pred)
+                # both must matter: each one's parameters significant in the joint fit
+                ev = pair_scan[key]
+                if ev["accepted"]:
+                    ev["accepted"] = all(_significant_param(ev["fit"], [m]) for m in (a, n))
+        acc2 = [k for k in pair_scan if pair_scan[k]["accepted"]]
+        if acc2:
+            k = max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"])
+            final = pair_scan[k]
+            selected = sorted(final["names"], key=lambda n: -single[n]["gain"]["gain"])
     return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan}
 
 

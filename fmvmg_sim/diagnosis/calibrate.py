@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .fitting import Fitter, Lin, Solution, scaled_inverse
-from .parameters import NOMINAL_KNOBS
+from .parameters import BOUND_TOLERANCES, KNOBS_BY_NAME, NOMINAL_KNOBS
 
 #: Posterior/prior standard-deviation ratio above which a parameter is "not identifiable".
 NOT_IDENTIFIABLE_RATIO = 0.5
@@ -40,6 +40,7 @@ class Calibration:
     base : ResponseTable
         Table at the calibrated point.
     iterations : int
+    solution : Solution
     """
 
     theta: dict
@@ -51,6 +52,12 @@ class Calibration:
     iterations: int
     solution: Solution
 
+    @property
+    def at_bound(self) -> list:
+        """Knobs the fit pushed to their bound (BOUND_TOLERANCES x tolerance): the record asks for a unit
+        outside its tolerance, itself a sign of an unmodelled effect."""
+        return [k for k, v in self.theta.items() if abs(v) >= 0.999 * BOUND_TOLERANCES * KNOBS_BY_NAME[k].tolerance]
+
     def to_json(self) -> dict:
         """JSON form.
 
@@ -59,8 +66,9 @@ class Calibration:
         dict
         """
         return {"parameters": {k: {"value": float(v), "sd": float(self.sd[k]), "identifiable": bool(self.identifiable[k]),
-                                   "tolerance": next(n.tolerance for n in NOMINAL_KNOBS if n.name == k)}
+                                   "tolerance": KNOBS_BY_NAME[k].tolerance, "at_bound": k in self.at_bound}
                                for k, v in self.theta.items()},
+                "at_bound": list(self.at_bound),
                 "confounded_pairs": [{"a": a, "b": b, "corr": float(c)} for a, b, c in self.correlated],
                 "iterations": self.iterations}
 

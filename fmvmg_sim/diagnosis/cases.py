@@ -2,9 +2,9 @@
 
 A case is the nominal device perturbed within its unit-to-unit tolerances, plus zero, one or two
 library effects with parameters drawn from their prior ranges (random sign where either is
-plausible) and scaled to span signal-to-noise ratios from below to well above the detection
-limit, simulated with the envelope engine and a fresh noise seed on a random temperature profile
-(holds and ramps at random temperatures and rates, sometimes rate-table steps). Records go to
+plausible) and their amplitudes scaled so that the signature's signal-to-noise ratio hits a target
+drawn log-uniformly from below to well above the detection limit (:data:`SNR_TARGET`), simulated
+with the envelope engine and a fresh noise seed on a random temperature profile (holds and ramps at random temperatures and rates, sometimes rate-table steps). Records go to
 ``cases/``; labels (effects, parameters, perturbations, seed, SNR) to ``labels/`` - a separate file
 the diagnoser is never given.
 """
@@ -24,6 +24,11 @@ from .parameters import NOMINAL_KNOBS, apply_nominal
 
 #: Case mix.
 P_NULL, P_SINGLE = 0.20, 0.55
+#: Range of the signature SNR the case generator aims at (log-uniform), from below to well above
+#: the detection limit.
+SNR_TARGET = (1.0, 1000.0)
+#: Parameters that are not amplitudes (time constants, widths).
+NOT_SCALED = ("tau_s", "width_K", "tau_h")
 #: SNR tiers of the signature left after the nominal calibration absorbs what it can.
 SNR_TIERS = ((0.0, 3.0, "below"), (3.0, 10.0, "near"), (10.0, np.inf, "above"))
 
@@ -100,7 +105,7 @@ def draw_effect(rng: np.random.Generator, name: str, scale: float) -> dict:
     out = {}
     for p, s in MODELS[name].items():
         v = float(np.exp(rng.uniform(np.log(s.prior[0]), np.log(s.prior[1]))))
-        if p not in ("tau_s", "width_K", "tau_h"):
+        if p not in NOT_SCALED:
             v *= scale
             if s.signed and rng.random() < 0.5:
                 v = -v
@@ -125,6 +130,7 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     dict
         The label.
     """
+    from ..effects import EffectSet
     from ..envelope.engine import run_envelope
     from ..scenario import load_scenario
     rng = np.random.default_rng([seed, k])
@@ -136,9 +142,8 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
         effects = [names[k % len(names)] if rng.random() < 0.5 else str(rng.choice(names))]
     else:
         effects = [str(x) for x in rng.choice(names, 2, replace=False)]
-    scale = float(np.exp(rng.uniform(np.log(0.1), np.log(3.0))))
-    eff = {n: draw_effect(rng, n, scale) for n in effects}
-    eff = validate_effects(eff, "case")
+    target = float(np.exp(rng.uniform(np.log(SNR_TARGET[0]), np.log(SNR_TARGET[1]))))
+    drawn = {n: draw_effect(rng, n, 1.0) for n in effects}
     theta = {kn.name: float(rng.uniform(-1, 1) * kn.tolerance) for kn in NOMINAL_KNOBS}
     scn = load_scenario(scenario_path)
     s = copy.copy(scn)
@@ -149,23 +154,76 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     tp, rp = random_profile(rng, duration_s)
     s.temperature = PiecewiseProfile(np.array([p[0] for p in tp]), np.array([p[1] for p in tp]), [])
     s.rate = PiecewiseProfile(np.array([p[0] for p in rp]), np.array([p[1] for p in rp]), [])
-    from ..effects import EffectSet
     s.device_nominal = scn.device_nominal
-    s.device = EffectSet(eff).apply_to_device(apply_nominal(scn.device_nominal, theta))
-    s.effects = eff
-    res = run_envelope(s, progress=False, log=lambda m: None)
-    rec = res.to_record()
-    rec.metadata = {"device": scn.device.name, "source": "diagnose-benchmark case"}
     (out / "cases").mkdir(parents=True, exist_ok=True)
     (out / "labels").mkdir(parents=True, exist_ok=True)
     path = out / "cases" / f"case_{k:04d}.csv"
-    write_record(path, rec)
-    label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "amplitude_scale": scale,
+
+    def simulate(eff):
+        s.device = EffectSet(eff).apply_to_device(apply_nominal(scn.device_nominal, theta))
+        s.effects = eff
+        rec = run_envelope(s, progress=False, log=lambda m: None).to_record()
+        rec.metadata = {"device": scn.device.name, "source": "diagnose-benchmark case"}
+        write_record(path, rec)
+
+    # amplitudes scaled so that each effect's signature SNR hits the drawn target (log secant on the
+    # quasi-static SNR, which needs only the record's time, temperature and applied rate)
+    eff = validate_effects(drawn, "case")
+    simulate(eff)
+    scales, snr_by = {}, {}
+    for n in effects:
+        scales[n], snr_by[n] = _scale_to(path, scenario_path, s.device_nominal, theta, {n: drawn[n]}, target)
+    if effects and any(v != 1.0 for v in scales.values()):
+        eff = validate_effects({n: scaled({n: drawn[n]}, scales[n])[n] for n in effects}, "case")
+        simulate(eff)
+    label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "amplitude_scale": scales,
+             "snr_target": target if effects else 0.0, "snr_by_effect": snr_by,
              "sim_seed": s.seed, "temperature_points": tp, "rate_points": rp}
-    label["snr"] = signature_snr(path, scenario_path, s.device_nominal, theta, eff)
-    label["tier"] = tier(label["snr"]) if effects else "null"
+    label["snr"] = signature_snr(path, scenario_path, s.device_nominal, theta, eff) if effects else 0.0
+    # a pair is as detectable as its weaker member
+    label["tier"] = tier(min(snr_by.values())) if effects else "null"
     atomic_write_text(out / "labels" / f"case_{k:04d}.json", json.dumps(label, indent=1) + "\n")
     return label
+
+
+def _scale_to(record_path, scenario_path, device_nominal, theta: dict, drawn: dict, target: float,
+              max_iter: int = 4) -> tuple[float, float]:
+    """Amplitude scale of ``drawn`` whose signature SNR is within 25 % of ``target`` (log secant)."""
+    scale = 1.0
+    snr = signature_snr(record_path, scenario_path, device_nominal, theta, validate_effects(drawn, "case"))
+    hist = [(scale, snr)]
+    for _ in range(max_iter):
+        if snr <= 0 or abs(np.log(snr / target)) < np.log(1.25):
+            break
+        p_ = 1.0
+        if len(hist) > 1 and hist[-1][1] > 0 and hist[-2][1] > 0 and hist[-1][0] != hist[-2][0]:
+            p_ = float(np.clip(np.log(hist[-1][1] / hist[-2][1]) / np.log(hist[-1][0] / hist[-2][0]), 0.25, 3.0))
+        scale = float(np.clip(scale * (target / snr) ** (1.0 / p_), 1e-4, 1e3))
+        snr = signature_snr(record_path, scenario_path, device_nominal, theta,
+                            validate_effects(scaled(drawn, scale), "case"))
+        hist.append((scale, snr))
+    return scale, float(snr)
+
+
+def scaled(effects: dict, scale: float) -> dict:
+    """Effects with their amplitude-like parameters multiplied by ``scale`` (clipped to the bounds).
+
+    Parameters
+    ----------
+    effects : dict
+    scale : float
+
+    Returns
+    -------
+    dict
+    """
+    out = {}
+    for n, ps in effects.items():
+        out[n] = {}
+        for p, v in ps.items():
+            sp = MODELS[n][p]
+            out[n][p] = float(np.clip(v * scale, sp.lo, sp.hi)) if p not in NOT_SCALED else v
+    return out
 
 
 def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effects: dict) -> float:

@@ -18,7 +18,7 @@ from scipy.optimize import lsq_linear
 from ..effects import MODELS, EffectSet
 from .data import Prepared
 from .forward import CHANNELS, ResponseTable, response_table, temperature_grid
-from .parameters import NOMINAL_KNOBS, apply_effects, apply_nominal
+from .parameters import BOUND_TOLERANCES, NOMINAL_KNOBS, apply_effects, apply_nominal
 
 #: Effects folded into the device (temperature laws); the others act on the path or the noise.
 DEVICE_EFFECTS = ("demod_phase_drift", "quadrature_drift", "q_factor_drift", "mode_split_drift",
@@ -241,9 +241,9 @@ class Fitter:
         K = len(NOMINAL_KNOBS)
         return Lin(y0, cols, [k.name for k in NOMINAL_KNOBS], np.array([theta.get(k.name, 0.0) for k in NOMINAL_KNOBS]),
                    np.array([k.tolerance for k in NOMINAL_KNOBS]),
-                   np.array([max(-4 * k.tolerance, -0.9) if k.kind.endswith("rel") else -4 * k.tolerance
-                             for k in NOMINAL_KNOBS]),
-                   np.array([4 * k.tolerance for k in NOMINAL_KNOBS]))
+                   np.array([max(-BOUND_TOLERANCES * k.tolerance, -0.9) if k.kind.endswith("rel")
+                             else -BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]),
+                   np.array([BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]))
 
     def solve(self, lin: Lin, rows: np.ndarray, extra_cols: np.ndarray | None = None) -> Solution:
         """Weighted, prior-regularised, bounded linear least squares on the blocks in ``rows``.

@@ -134,6 +134,10 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
             m = (taus >= max(lo, 1.5 / fs)) & (taus <= min(hi, span / 10)) & np.isfinite(adev) & (adev > 0)
             if m.any():
                 out["allan_bands"][b] = float(np.mean(np.log(adev[m])))
+                # sampling spread of log ADEV (about 1/sqrt(2 EDF), EDF ~ span/tau): a floor on the null's
+                # spread, which a few replicates estimate poorly where there are few averages
+                edf = np.maximum(span / taus[m] - 1.0, 1.0)
+                out.setdefault("_sd_floor", {})[b] = float(np.sqrt(np.mean(1.0 / (2.0 * edf))))
         out["_allan"] = (taus, adev)
     return out
 
@@ -163,7 +167,7 @@ def compare(measured: dict, nulls: list[dict], alpha: float = ALPHA) -> dict:
             mv = np.log(max(v, 1e-300)) if logs else v
             rv = np.log(np.maximum(ref, 1e-300)) if logs else ref
             mu, sd = float(np.mean(rv)), float(np.std(rv, ddof=1))
-            sd = max(sd, 0.05)
+            sd = max(sd, 0.05, measured.get("_sd_floor", {}).get(name, 0.0) if g == "allan_bands" else 0.0)
             z = (mv - mu) / (sd * np.sqrt(1 + 1 / len(rv)))
             p = float(stats.t.sf(z, df=len(rv) - 1))
             rows.append((g, name, v, mu, sd, z, p))

@@ -30,6 +30,27 @@ NONLINEAR = {
 }
 
 
+#: Weak Gaussian prior on each fitted effect amplitude: zero mean, this many times the top of its
+#: prior range as standard deviation. It only matters where the data say nothing (a training window
+#: that is one temperature hold cannot see a temperature coefficient, which then stays near zero
+#: instead of extrapolating wildly into the held-out ramp).
+EFFECT_PRIOR_WIDTH = 3.0
+
+
+def effect_prior_sd(name: str, param: str) -> float:
+    """Standard deviation of the weak zero-mean prior on an effect amplitude.
+
+    Parameters
+    ----------
+    name, param : str
+
+    Returns
+    -------
+    float
+    """
+    return EFFECT_PRIOR_WIDTH * float(MODELS[name][param].prior[1])
+
+
 def _start(name: str) -> dict:
     """Starting values of an effect's parameters (signed ones at 0, others mid-prior)."""
     out = {}
@@ -183,7 +204,8 @@ class EffectModel:
         if cols:
             C = np.stack(cols, axis=-1)
             lin = Lin(lin.y0, np.concatenate([lin.cols, C], axis=-1), lin.names + names,
-                      np.concatenate([lin.x0, x0]), np.concatenate([lin.prior_sd, np.full(len(x0), np.nan)]),
+                      np.concatenate([lin.x0, x0]),
+                      np.concatenate([lin.prior_sd, [effect_prior_sd(*nm.split(".")) for nm in names]]),
                       np.concatenate([lin.lo, lo]), np.concatenate([lin.hi, hi]))
         return lin
 

@@ -71,7 +71,8 @@ def quantization_candidate(prep: Prepared, nominal_lsb_V: float) -> dict | None:
     return None
 
 
-def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=_FLICKER) -> tuple[float, float]:
+def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=_FLICKER,
+                span_s: float | None = None) -> tuple[float, float]:
     """Mean excess Allan variance in a band and its z-score against the null spread.
 
     Parameters
@@ -79,6 +80,8 @@ def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=
     taus, adev_meas : ndarray
     adev_nulls : list of ndarray
     band : tuple, optional
+    span_s : float, optional
+        Length of the data behind the curves (s); default ten times the longest tau.
 
     Returns
     -------
@@ -95,7 +98,11 @@ def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=
     meas = np.mean(adev_meas[m] ** 2)
     ref = N.mean(axis=1)
     ex = float(meas - ref.mean())
-    sd = float(max(ref.std(ddof=1), 0.05 * ref.mean()))
+    # a few null replicates underestimate the spread where there are few averages: floor it at the
+    # sampling spread of an Allan variance, sqrt(2 / EDF) relative, EDF ~ span / tau
+    span = span_s if span_s is not None else float(taus[-1]) * 10.0
+    edf = np.maximum(span / taus[m] - 1.0, 1.0)
+    sd = float(max(ref.std(ddof=1), np.sqrt(np.mean(2.0 / edf)) * ref.mean(), 0.05 * ref.mean()))
     return ex, ex / (sd * np.sqrt(1 + 1 / len(ref)))
 
 

@@ -57,6 +57,10 @@ NOMINAL_KNOBS: tuple[Knob, ...] = (
     Knob("vref_rel", ("circuit", "reference", "vref_V"), "rel", 0.01, 1e-4),
 )
 NOMINAL_NAMES = tuple(k.name for k in NOMINAL_KNOBS)
+#: Calibration bounds in tolerances: a unit is within its tolerance (with this margin for the
+#: linearisation); a fit that needs more is itself evidence of an unmodelled effect, so the nominal
+#: parameters are not allowed to absorb an effect's signature by leaving their tolerance.
+BOUND_TOLERANCES = 1.5
 KNOBS_BY_NAME = {k.name: k for k in NOMINAL_KNOBS}
 
 

@@ -246,8 +246,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                    "detail": {"on_lattice": q["on_lattice"]} if q else {}})
     if q:
         noise_accepted.append("quantization")
-    ex_ho, z_ho = band_excess(meas_ho_allan[0], meas_ho_allan[1], null_ho_allan)
-    ex_tr, z_tr = band_excess(meas_tr_allan[0], meas_tr_allan[1], null_tr_allan)
+    dt = prep.sample_interval_s
+    ex_ho, z_ho = band_excess(meas_ho_allan[0], meas_ho_allan[1], null_ho_allan, span_s=ho_s.sum() * dt)
+    ex_tr, z_tr = band_excess(meas_tr_allan[0], meas_tr_allan[1], null_tr_allan, span_s=(~ho_s).sum() * dt)
     flick_ok = bool(z_ho > FLICKER_Z_HELDOUT and z_tr > FLICKER_Z_TRAIN and not q)
     g_before = max(ex_ho, 0.0)
     g_after = abs(ex_ho - max(ex_tr, 0.0))
@@ -277,6 +278,13 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                     "gap_before": {k: float(np.sqrt(v)) for k, v in before.items()},
                     "gap_after": {k: float(np.sqrt(v)) for k, v in after.items()},
                     "shrink": _shrink(before, after)}
+    if combined is not None and len(att["selected"]) > 1:
+        # a pair's members are reported with the joint fit's parameters and the joint shrink
+        for r in ranked:
+            if r["effect"] in att["selected"]:
+                r["single_fit_params"] = r.get("params")
+                r["params"] = combined["params"][r["effect"]]
+                r["shrink"] = combined["shrink"].get(primary)
     # 'unexplained' needs a gap beyond the (Holm-corrected) null band in an Allan band or a temperature
     # regime: a channel-level excess alone (one statistic against a few null runs) is not a located gap
     sig_located = [s_ for s_ in sig if s_[0] in ("allan_bands", "regimes")]
@@ -304,7 +312,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                               "train_blocks": int(f["train"].sum()), "test_blocks": int(f["test"].sum())}
                              for f in folds]},
         "settings": {"null_runs": n_null, "seed": seed, "block_s": float(np.median(np.diff(prep.block_time_s()))),
-                     "delta_bic_max": -10.0, "alpha_holm": loc.ALPHA},
+                     "delta_bic_max": -10.0, "alpha_holm": loc.ALPHA,
+                     "folds_not_scored": scorer.dropped_folds},
         "wall_time_s": time.perf_counter() - wall0,
     }
     report["_debug"] = {"single": {n: {"gain": ev["gain"].get("by_channel"), "dbic": ev["delta_bic"]}

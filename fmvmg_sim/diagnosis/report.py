@@ -72,10 +72,14 @@ def markdown(rep: dict) -> str:
         L.append(f"Gaps: {len(iss.get('gaps', []))} ({iss.get('gap_total_s', 0):.0f} s missing); "
                  f"NaN samples: {iss.get('nan_samples', {})} (bridged for the model inputs, skipped in the fits).")
         L.append("")
-    L += ["## 1. Calibration (training window)", "", "| parameter | value | sd | tolerance | identifiable |",
-          "|---|---|---|---|---|"]
+    L += ["## 1. Calibration (training window)", "",
+          "| parameter | value | sd | tolerance | identifiable | at its bound |", "|---|---|---|---|---|---|"]
     for k, v in rep["calibration"]["parameters"].items():
-        L.append(f"| {k} | {v['value']:.4g} | {v['sd']:.2g} | {v['tolerance']:.3g} | {'yes' if v['identifiable'] else 'no'} |")
+        L.append(f"| {k} | {v['value']:.4g} | {v['sd']:.2g} | {v['tolerance']:.3g} | "
+                 f"{'yes' if v['identifiable'] else 'no'} | {'**yes**' if v.get('at_bound') else ''} |")
+    if rep["calibration"].get("at_bound"):
+        L += ["", "The nominal model needs parameters outside the unit's tolerance "
+              f"({', '.join(rep['calibration']['at_bound'])}): the nominal model alone cannot reproduce the record."]
     L += ["", "## 2. Where the gap lies (against the re-simulated null, Holm-corrected)", "",
           "| group | statistic | z | p (Holm) | significant |", "|---|---|---|---|---|"]
     for g in ("channels", "allan_bands", "regimes"):
