@@ -64,3 +64,23 @@ def test_two_effects(tmp_path):
     rec, _ = oven_record(tmp_path, "pair", eff, seed=14, theta=THETA)
     rep = diagnose(rec, NOMINAL, n_null=3, progress=False)
     assert sorted(rep["accepted"]) == sorted(eff), rep["accepted"]
+
+
+@pytest.mark.slow
+def test_out_of_library_gap_is_unexplained(tmp_path):
+    # a bias wander no library effect makes (a 50 min sine in time, unrelated to temperature): the
+    # diagnosis must not force a library effect onto it, and must say where the gap lies
+    rec, _ = oven_record(tmp_path, "ool", seed=15, theta=THETA)
+    r = read_record(rec)
+    cols = {k: v.copy() for k, v in r.columns.items()}
+    wander_dps = 0.05 * np.sin(2 * np.pi * cols["time_s"] / 3000.0)
+    sf = np.nanmedian(cols["rate_V"] / np.where(cols["rate_dps"] != 0, cols["rate_dps"], np.nan))
+    cols["rate_dps"] = cols["rate_dps"] + wander_dps
+    cols["rate_V"] = cols["rate_V"] + wander_dps * sf
+    write_record(tmp_path / "ool_wander.csv", type(r)(cols, r.metadata))
+    rep = diagnose(tmp_path / "ool_wander.csv", NOMINAL, n_null=3, progress=False)
+    assert rep["verdict"] == "unexplained", [(x["effect"], x["accepted"], x.get("heldout_gain_ci"))
+                                             for x in rep["ranked"][:4]]
+    assert rep["accepted"] == []
+    groups = {s["group"] for s in rep["remainder"]["significant"]}
+    assert groups & {"allan_bands", "regimes"}

@@ -9,7 +9,7 @@ accepted when
   interval is above zero in at least 2 of the 3 folds;
 * Delta-BIC on the training window is below -10;
 * its parameters lie inside their physical bounds (not pinned at a bound);
-* at least one of its linear parameters is more than 2 standard errors from "no effect".
+* at least one of its linear parameters is more than 2 noise-model standard errors from "no effect".
 
 Two effects: forward selection (the best accepted effect, then each other candidate jointly
 with it, scored against the one-effect model). Noise-level effects (quantisation, flicker) are
@@ -218,8 +218,13 @@ def _in_bounds(eff: dict) -> bool:
 
 
 def _significant_param(mf: ModelFit, names: list) -> bool:
+    """One linear parameter of ``names`` more than 2 noise-model standard errors from zero.
+
+    The held-out gain judges whether the effect generalises; this only asks that the data (not the
+    prior) pulled it away from "no effect". The chi-square-inflated errors would make every effect
+    look insignificant whenever some other misfit dominates the training residual."""
     for n in names:
-        for p, sd in mf.sd.get(n, {}).items():
+        for p, sd in mf.sd_noise.get(n, {}).items():
             v = mf.effects[n][p]
             if np.isfinite(sd) and sd > 0 and abs(v) > 2 * sd:
                 return True

@@ -9,7 +9,8 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
 * ``pairs_exact``: two-effect cases whose accepted set equals the truth;
 * ``truth_in_ambiguity_set``: effect cases whose true effect is accepted or in an ambiguity set;
 * ``median_shrink``: held-out gap shrink of the accepted effect when the attribution is right;
-* ``param_rel_error_median``: relative error of the recovered parameters when right;
+* ``param_rel_error_median``: relative error of the recovered parameters when right
+  (:func:`param_errors`);
 * every rate also by SNR tier.
 """
 
@@ -46,6 +47,38 @@ def _diagnose_case(record: str, scenario: str, n_null: int, out_dir: str) -> dic
 def _make(k, seed, out, scenario, duration_s, rate_Hz):
     from .cases import make_case
     return make_case(k, seed, Path(out), scenario, duration_s, rate_Hz)
+
+
+def param_errors(effect: str, truth: dict, est: dict) -> list[float]:
+    """Relative errors of recovered parameters.
+
+    Each error is relative to ``max(|truth|, low end of the prior range)``: an amplitude drawn far
+    below its plausible range (to reach a low SNR) is judged on the scale of a plausible value, not
+    on its own near-zero size. Flicker is scored on its equivalent output level (phase and output
+    flicker are not separable from the rate output).
+
+    Parameters
+    ----------
+    effect : str
+    truth, est : dict
+
+    Returns
+    -------
+    list of float
+    """
+    from ..effects import MODELS
+    if effect == "flicker_noise":
+        lvl = lambda d: d.get("h_output_dps2", 0.0) + d.get("h_phase_rad2", 0.0) * 200.0 ** 2  # noqa: E731
+        t, e = lvl(truth), lvl(est)
+        return [abs(e - t) / t] if t > 0 and est else []
+    out = []
+    for p, v in truth.items():
+        e = est.get(p)
+        if e is None:
+            continue
+        ref = max(abs(v), MODELS[effect][p].prior[0])
+        out.append(abs(e - v) / ref)
+    return out
 
 
 def score(labels: list[dict], results: list[dict]) -> dict:
@@ -87,10 +120,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             r["shrink"] = float(np.median(sh)) if sh else None
             errs = []
             for t in right:
-                for p, v in lab["effects"][t].items():
-                    est = (res["rows"][t].get("params") or {}).get(p)
-                    if est is not None and v != 0:
-                        errs.append(abs(est - v) / abs(v))
+                errs += param_errors(t, lab["effects"][t], res["rows"][t].get("params") or {})
             r["param_rel_error"] = float(np.median(errs)) if errs else None
         rows.append(r)
 

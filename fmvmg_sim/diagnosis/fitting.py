@@ -80,12 +80,15 @@ class Solution:
         Weighted sum of squares of the data rows.
     n : int
         Data rows used.
+    cov_noise : ndarray, optional
+        Covariance under the noise model alone (not inflated by a systematic misfit).
     """
 
     x: np.ndarray
     cov: np.ndarray
     cost: float
     n: int
+    cov_noise: np.ndarray | None = None
 
 
 class Fitter:
@@ -292,10 +295,9 @@ class Fitter:
         d = ds / scale
         x = lin.x0 + d
         cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
-        cov = scaled_inverse(M.T @ M + P.T @ P)
+        cov0 = scaled_inverse(M.T @ M + P.T @ P)
         red = cost / max(n - K, 1)
-        cov = cov * max(red, 1.0)
-        return Solution(x, cov, cost, n)
+        return Solution(x, cov0 * max(red, 1.0), cost, n, cov0)
 
     def set_score_floor(self, table: ResponseTable, die_b: np.ndarray, die_floor_K: float,
                         rel_floor: float = 0.0) -> None:

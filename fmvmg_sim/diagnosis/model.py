@@ -80,7 +80,9 @@ class ModelFit:
     solution : Solution
     lin : Lin
     sd : dict
-        ``{effect: {param: sd}}`` for the linear parameters.
+        ``{effect: {param: sd}}`` for the linear parameters (inflated by the reduced chi-square).
+    sd_noise : dict
+        The same under the noise model alone.
     """
 
     effects: dict
@@ -88,6 +90,7 @@ class ModelFit:
     solution: Solution
     lin: Lin
     sd: dict = field(default_factory=dict)
+    sd_noise: dict = field(default_factory=dict)
     _ctx: dict = field(default_factory=dict, repr=False)
 
     def refit(self, rows: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -279,16 +282,18 @@ class EffectModel:
                             self.values[n][p] = eff[n][p]
                 if self.free_nl:
                     self._near = eff[self.free_nl[0]][NONLINEAR[self.free_nl[0]][0]]
-        sd = {}
+        sd, sd_noise = {}, {}
         sds = np.sqrt(np.clip(np.diag(sol.cov), 0, None))
+        sdn = np.sqrt(np.clip(np.diag(sol.cov_noise), 0, None))
         for i, nm in enumerate(lin.names[len(NOMINAL_KNOBS):]):
             n, p = nm.split(".")
             sd.setdefault(n, {})[p] = float(sds[len(NOMINAL_KNOBS) + i])
+            sd_noise.setdefault(n, {})[p] = float(sdn[len(NOMINAL_KNOBS) + i])
 
         def refit(r):
             nl2, lin2, sol2 = self._search(r)
             return lin2.predict(sol2.x), self._unpack(lin2, sol2.x, nl2)[1]
-        mf = ModelFit(eff, theta, sol, lin, sd)
+        mf = ModelFit(eff, theta, sol, lin, sd, sd_noise)
         mf._ctx["refit"] = refit
         mf._ctx["pred"] = lin.predict(sol.x)
         return mf

@@ -109,8 +109,16 @@ def _metrics(prep: Prepared, fitter: Fitter, pred: np.ndarray, mask: np.ndarray)
     return out
 
 
+#: The headline gap: held-out excess mean square over the null's, in units of the null's, summed over channels.
+TOTAL_GAP = "total_excess_over_noise"
+
+
 def _gaps(ms: dict, noise: dict) -> dict:
-    return {k: max(0.0, v - noise.get(k, 0.0)) for k, v in ms.items()}
+    """Excess mean squares over the null's, plus their noise-normalised sum over channels (:data:`TOTAL_GAP`)."""
+    out = {k: max(0.0, v - noise.get(k, 0.0)) for k, v in ms.items()}
+    out[TOTAL_GAP] = float(sum(out[k] / noise[k] for k in out
+                               if not k.startswith("rms_rate_dps_") and noise.get(k, 0.0) > 0))
+    return out
 
 
 def _shrink(before: dict, after: dict) -> dict:
@@ -220,8 +228,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     # 4. gap before/after per metric on held-out data
     nominal_ho = scorer.nominal["heldout"]
     before = _gaps(_metrics(prep, fitter, nominal_ho, ho_b), noise_ms)
-    primary = max((k for k in before if not k.startswith("rms_rate_dps_")),
-                  key=lambda k: before[k] / max(noise_ms.get(k, 1e-300), 1e-300))
+    primary = TOTAL_GAP
     ranked = []
     for name, ev in att["single"].items():
         if ev["fit"] is None:
