@@ -26,6 +26,8 @@ N_SEGMENTS = 5
 N_FOLDS = 3
 #: Gap between a fold's training data and its held-out block, as a fraction of a segment.
 GAP_FRACTION = 0.2
+#: Samples this close to rate-table motion are left out of the noise statistics (s).
+RATE_MARGIN_S = 30.0
 #: Shortest record the windows allow (s).
 MIN_DURATION_S = 3600.0
 #: |dT/dt| below which the oven is holding (K/min).
@@ -233,6 +235,31 @@ class Prepared:
             out.append(dict(train=tb < start - GAP_FRACTION * seg, test=(tb >= start) & (tb < end + 1e-9),
                             test_start_s=float(start), test_end_s=float(end)))
         return out
+
+    def static_rate_samples(self, margin_s: float = RATE_MARGIN_S) -> np.ndarray:
+        """Samples with no applied rate, at least ``margin_s`` away from any rate-table motion.
+
+        Noise statistics (Allan bands) are read here: a rate step multiplies any scale-factor error
+        into the residual and would swamp a noise-level effect.
+
+        Parameters
+        ----------
+        margin_s : float, optional
+
+        Returns
+        -------
+        ndarray of bool
+        """
+        key = ("static", margin_s)
+        if key not in self._cache:
+            moving = np.abs(self.rate_true_dps) > 0
+            if moving.any():
+                k = max(int(round(margin_s / self.sample_interval_s)), 0)
+                grown = np.convolve(moving.astype(float), np.ones(2 * k + 1), mode="same") > 0
+                self._cache[key] = ~grown
+            else:
+                self._cache[key] = np.ones(len(self.t_s), bool)
+        return self._cache[key]
 
     def heldout_mask_samples(self) -> np.ndarray:
         """Samples in the held-out segments.

@@ -79,6 +79,21 @@ def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool 
     return out
 
 
+def noise_mask(prep: Prepared) -> np.ndarray:
+    """Samples the noise statistics are read from: away from rate-table motion (unless that is most of it).
+
+    Parameters
+    ----------
+    prep : Prepared
+
+    Returns
+    -------
+    ndarray of bool
+    """
+    quiet = prep.static_rate_samples()
+    return quiet if quiet.mean() >= 0.5 else np.ones_like(quiet)
+
+
 def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mask_b: np.ndarray | None = None,
                    mask_s: np.ndarray | None = None) -> dict:
     """The localisation statistics of one residual (measured or null).
@@ -123,7 +138,9 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
                     d.append(np.nanmean(Zb[h, i]) - np.nanmean(Zb[k, i]))
             if d:
                 out["regimes"][f"heating_minus_cooling_{c}"] = float(np.mean(np.square(d)))
-    x = rate_res_dps if mask_s is None else rate_res_dps[mask_s]
+    quiet = noise_mask(prep)
+    ms = quiet if mask_s is None else (mask_s & quiet)
+    x = rate_res_dps[ms]
     x = np.nan_to_num(x - np.nanmean(x))
     fs = 1.0 / prep.sample_interval_s
     if len(x) > 100:

@@ -254,8 +254,10 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     if q:
         noise_accepted.append("quantization")
     dt = prep.sample_interval_s
-    ex_ho, z_ho = band_excess(meas_ho_allan[0], meas_ho_allan[1], null_ho_allan, span_s=ho_s.sum() * dt)
-    ex_tr, z_tr = band_excess(meas_tr_allan[0], meas_tr_allan[1], null_tr_allan, span_s=(~ho_s).sum() * dt)
+    quiet = loc.noise_mask(prep)
+    ex_ho, z_ho = band_excess(meas_ho_allan[0], meas_ho_allan[1], null_ho_allan, span_s=(ho_s & quiet).sum() * dt)
+    ex_tr, z_tr = band_excess(meas_tr_allan[0], meas_tr_allan[1], null_tr_allan,
+                              span_s=(~ho_s & quiet).sum() * dt)
     flick_ok = bool(z_ho > FLICKER_Z_HELDOUT and z_tr > FLICKER_Z_TRAIN and not q)
     g_before = max(ex_ho, 0.0)
     g_after = abs(ex_ho - max(ex_tr, 0.0))
