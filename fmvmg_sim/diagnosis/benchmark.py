@@ -45,6 +45,7 @@ def _diagnose_case(record: str, scenario: str, n_null: int, out_dir: str) -> dic
 
 
 def _make(k, seed, out, scenario, duration_s, rate_Hz):
+    from . import pipeline  # noqa: F401  (bind the whole diagnosis code in the worker before any case)
     from .cases import make_case
     return make_case(k, seed, Path(out), scenario, duration_s, rate_Hz)
 

@@ -333,7 +333,10 @@ def prepare(record: Record, sf_nominal_V_per_dps: float, block_s: float = BLOCK_
     t_mid = t_rel - 0.5 * first
     case_mid = np.interp(t_mid, t_rel, temp_s, left=temp_s[0])
     rate_true = np.nan_to_num(np.asarray(record.columns.get("rate_true_dps", np.zeros_like(t)), dtype=float))
-    rate_true_mid = rate_true  # a rate table holds each rate for many samples
+    # the applied rate is read at the sample times while the outputs are means over each sample's
+    # interval: evaluate it at the interval centres (else every rate step leaves half a sample of
+    # full-scale rate in the residual, which the calibration then bends the nominal knobs to absorb)
+    rate_true_mid = np.interp(t_mid, t_rel, rate_true, left=rate_true[0]) if len(rate_true) > 1 else rate_true
     obs = {}
     for c in CHANNELS:
         if c in record.columns and np.isfinite(record[c]).any():

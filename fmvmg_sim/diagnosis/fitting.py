@@ -106,6 +106,10 @@ class Fitter:
         self.device0 = device
         self.Y = prep.block_obs()
         self.S = prep.block_sigma()
+        #: Blocks where the applied rate changes (and the next): the quasi-static model does not
+        #: describe the sense chain's transient, so the rate channel is left out there
+        self.transient_b = transient_blocks(prep)
+        self.Y[self.transient_b, CHANNELS.index("rate_V")] = np.nan
         self.present = np.array([c in prep.channels for c in CHANNELS])
         self.has_rate = bool(np.any(prep.rate_true_dps != 0))
         c = prep.case_C
@@ -353,6 +357,28 @@ class Fitter:
         Z = (self.Y - pred) / self.S
         Z[:, ~self.present] = np.nan
         return Z
+
+
+def transient_blocks(prep: Prepared) -> np.ndarray:
+    """Blocks in which the applied rate changes, and the block after each.
+
+    Parameters
+    ----------
+    prep : Prepared
+
+    Returns
+    -------
+    ndarray of bool, shape (n_blocks,)
+    """
+    out = np.zeros(prep.n_blocks, bool)
+    r = np.asarray(prep.rate_true_dps, dtype=float)
+    i = np.flatnonzero(np.abs(np.diff(r)) > 0)
+    if i.size:
+        b = np.unique(np.concatenate([prep.block[i], prep.block[i + 1]]))
+        b = b[b >= 0]
+        out[b] = True
+        out[np.minimum(b + 1, prep.n_blocks - 1)] = True
+    return out
 
 
 def effect_bounds(name: str) -> tuple[list, np.ndarray, np.ndarray]:

@@ -130,17 +130,20 @@ def _shrink(before: dict, after: dict) -> dict:
 
 
 def _null_noise_model(null_Z: list) -> list:
-    """AR(1) parameters per channel pooled over the null replicates (s floored at 0.05)."""
-    from .likelihood import ar1_fit
+    """Slow-state noise model ``(rho, K, s)`` per channel, pooled over the null replicates (s floored at 0.05).
+
+    See :mod:`.likelihood`: an AR(1) alone cannot hold both the white block noise and the slow
+    flicker wander of the rate output, and then credits any candidate that follows the wander.
+    """
+    from .likelihood import slow_state_fit
     out = []
     for c in range(null_Z[0].shape[1]):
-        fits = [ar1_fit(Z[:, c]) for Z in null_Z if np.isfinite(Z[:, c]).sum() > 3]
-        if not fits:
+        series = [Z[:, c] for Z in null_Z if np.isfinite(Z[:, c]).sum() > 3]
+        if not series:
             out.append(None)
             continue
-        rho = float(np.mean([f[0] for f in fits]))
-        s = float(np.sqrt(np.mean([f[1] ** 2 for f in fits])))
-        out.append((rho, max(s, 0.05)))
+        rho, K, s = slow_state_fit(series)
+        out.append((rho, K, max(s, 0.05)))
     return out
 
 
@@ -205,6 +208,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     st_null, null_ms, null_ho_allan, null_tr_allan, null_Z = [], [], [], [], []
     for nr in nulls:
         Yn = np.column_stack([prep.block_mean(nr[c]) for c in CHANNELS])
+        Yn[fitter.transient_b, IRATE] = np.nan  # as in the measured blocks
         Zn = (Yn - pred_cal) / fitter.S
         Zn[:, ~fitter.present] = np.nan
         Zs = (Yn - pred_cal) / fitter.S_score

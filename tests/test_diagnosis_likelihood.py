@@ -1,0 +1,50 @@
+"""The scoring likelihood: slow-state (ARMA(1,1)) noise fitted by maximum likelihood, block bootstrap."""
+
+import numpy as np
+
+from fmvmg_sim.diagnosis.likelihood import block_bootstrap_ci, block_length, innovations, slow_state_fit
+
+
+def _slow_plus_white(n, rho, q, r, seed):
+    rng = np.random.default_rng(seed)
+    x = np.zeros(n)
+    u = rng.normal(scale=np.sqrt(q), size=n)
+    for t in range(1, n):
+        x[t] = rho * x[t - 1] + u[t]
+    return x + rng.normal(scale=np.sqrt(r), size=n)
+
+
+def test_slow_state_fit_recovers_kalman_parameters():
+    rho, q, r = 0.99, 0.09, 1.0
+    z = _slow_plus_white(20000, rho, q, r, 0)
+    # steady-state Riccati by hand: P = rho^2 (P - P^2/(P + r)) + q
+    P = 1.0
+    for _ in range(5000):
+        P = rho ** 2 * (P - P * P / (P + r)) + q
+    K, s = P / (P + r), np.sqrt(P + r)
+    rho_f, K_f, s_f = slow_state_fit([z[:10000], z[10000:]])
+    assert abs(rho_f - rho) < 0.005 and abs(K_f - K) / K < 0.15 and abs(s_f - s) / s < 0.03
+    e = innovations(z, rho_f, K_f)
+    # innovations are white: lag-1 autocorrelation near 0 (the raw series' is ~0.5)
+    e = e[100:] - e[100:].mean()
+    assert abs(np.dot(e[1:], e[:-1]) / np.dot(e, e)) < 0.03
+    zz = z - z.mean()
+    assert np.dot(zz[1:], zz[:-1]) / np.dot(zz, zz) > 0.3
+
+
+def test_white_series_gives_negligible_slow_state():
+    z = np.random.default_rng(1).normal(size=8000)
+    rho, K, s = slow_state_fit([z])
+    assert abs(s - 1.0) < 0.03 and K * rho < 0.1
+
+
+def test_block_length_grows_with_correlation_and_ci_widens():
+    rng = np.random.default_rng(2)
+    white = rng.normal(size=600)
+    slow = np.convolve(rng.normal(size=700), np.ones(60) / np.sqrt(60), mode="valid")[:600]
+    assert block_length(white) <= 2 * round(2 * 600 ** (1 / 3))
+    assert block_length(slow) >= 60
+    lo_w, hi_w = block_bootstrap_ci(white)
+    lo_s, hi_s = block_bootstrap_ci(slow)
+    # the interval of the correlated series reflects its ~10 effective samples, not 600
+    assert (hi_s - lo_s) > 3 * (hi_w - lo_w)
