@@ -205,14 +205,17 @@ class Scorer:
 
 
 def _in_bounds(eff: dict) -> bool:
-    """Every parameter inside its physical bounds and not pinned at a bound (other than a natural zero)."""
+    """Every parameter inside its physical bounds and not pinned at a bound.
+
+    A bound at zero is the "no effect" end of an amplitude (a feedthrough capacitance of 0.04 fF
+    is small, not pinned), so only non-zero bounds count as pins."""
     for n, ps in eff.items():
         for p, v in ps.items():
             s = MODELS[n][p]
             eps = 1e-3 * (s.hi - s.lo)
             if not s.lo <= v <= s.hi:
                 return False
-            if v != 0.0 and (v - s.lo < eps or s.hi - v < eps):
+            if (s.lo != 0.0 and v - s.lo < eps) or (s.hi != 0.0 and s.hi - v < eps):
                 return False
     return True
 
