@@ -292,14 +292,15 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
     -------
     dict
         ``single``: {effect: evaluation}; ``selected``: list of effect names; ``final``: evaluation of the
-        selected set (or None); ``pair_scan``: {effect: evaluation with the first}.
+        selected set (or None); ``pair_scan``: {effect: evaluation with the first};
+        ``pair_alternatives``: {member of a pair fitted from scratch: look-alikes that could replace it}.
     """
     base = scorer.nominal
     single = {}
     for n in tqdm(DETERMINISTIC, disable=not progress, file=sys.stderr, desc="attribution", unit="effect"):
         single[n] = evaluate(scorer, [n], base, scorer.nominal_train_pred)
     acc = [n for n in single if single[n]["accepted"]]
-    selected, final, pair_scan = [], None, {}
+    selected, final, pair_scan, pair_alternatives = [], None, {}, {}
     if acc:
         best = max(acc, key=lambda n: single[n]["gain"]["gain"])
         selected, final = [best], single[best]
@@ -331,9 +332,14 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
     elif max_effects > 1:
         # no single effect passes, but a pair may: each alone mis-fits the other's signature (pinned at a
         # bound, or extrapolating badly); start from the strongest candidates and fit pairs from scratch
-        starts = sorted((n for n in single if single[n]["fit"] is not None and single[n]["gain"]["ci"][0] > 0
+        fitted = [n for n in single if single[n]["fit"] is not None]
+        starts = sorted((n for n in fitted if single[n]["gain"]["ci"][0] > 0
                          and single[n]["gain"]["folds_passed"] >= scorer.folds_needed),
                         key=lambda n: -single[n]["gain"]["gain"])[:PAIR_STARTS]
+        # also the best training fits: an effect whose held-out score suffers from the other one's
+        # unmodelled signature (the calibration bent to absorb it) still fits its training window well
+        starts += [n for n in sorted((n for n in fitted if single[n]["delta_bic"] < DELTA_BIC_MAX),
+                                     key=lambda n: single[n]["delta_bic"])[:PAIR_STARTS + 1] if n not in starts]
         for a in starts:
             for n in single:
                 key = "+".join(sorted((a, n)))
@@ -349,7 +355,21 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
             k = max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"])
             final = pair_scan[k]
             selected = sorted(final["names"], key=lambda n: -single[n]["gain"]["gain"])
-    return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan}
+            # look-alike pairs: a pair sharing one member whose held-out gain reaches the best one's interval
+            lo = final["gain"]["ci"][0]
+            for k2, ev in pair_scan.items():
+                if k2 == k or ev["fit"] is None or ev["gain"]["gain"] < lo or not ev["in_bounds"]:
+                    continue
+                shared = set(ev["names"]) & set(selected)
+                if len(shared) == 1:
+                    kept = shared.pop()
+                    swapped = [m for m in selected if m != kept][0]
+                    alt = [m for m in ev["names"] if m != kept][0]
+                    pair_alternatives.setdefault(swapped, [])
+                    if alt not in pair_alternatives[swapped]:
+                        pair_alternatives[swapped].append(alt)
+    return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan,
+            "pair_alternatives": pair_alternatives}
 
 
 def ambiguity(single: dict, best: str) -> list[str]:

@@ -278,7 +278,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     # ambiguity sets and separating experiments
     amb, experiments = {}, {}
     for a in att["selected"]:
-        others = ambiguity(att["single"], a) if a == att["selected"][0] else []
+        others = ambiguity(att["single"], a) if a == att["selected"][0] and len(att["selected"]) == 1 else []
+        others += [o for o in att.get("pair_alternatives", {}).get(a, []) if o not in others]
         others = [o for o in others if o not in accepted]
         if others:
             amb[a] = others
