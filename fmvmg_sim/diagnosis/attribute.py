@@ -313,17 +313,13 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
             # the first effect's model is accurate to a fraction of its own signature: that fraction
             # floors the scoring sigma of a second effect, which must explain more than the first one's
             # model error (else any leftover misfit of a strong first effect buys a spurious second)
-            saved = scorer.f.S_score
             sig1 = np.abs(final["fit"]._ctx["pred"] - scorer.nominal_train_pred)
-            scorer.f.S_score = np.sqrt(saved ** 2 + (SECOND_EFFECT_REL_FLOOR * np.nan_to_num(sig1)) ** 2)
-            for n in others:
-                if n in NONLINEAR and best in NONLINEAR and n == best:
-                    continue
-                # the first effect's nonlinear parameter is refitted unless the second has its own
-                fx = fixed if n in NONLINEAR else {}
-                pair_scan[n] = evaluate(scorer, [best, n], final["preds"], final["fit"]._ctx["pred"], fx,
-                                        k_base=len(MODELS[best]), new=[n])
-            scorer.f.S_score = saved
+            with scorer.f.extra_score_floor(SECOND_EFFECT_REL_FLOOR * sig1):
+                for n in others:
+                    # the first effect's nonlinear parameter is refitted unless the second has its own
+                    fx = fixed if n in NONLINEAR else {}
+                    pair_scan[n] = evaluate(scorer, [best, n], final["preds"], final["fit"]._ctx["pred"], fx,
+                                            k_base=len(MODELS[best]), new=[n])
             acc2 = [n for n in pair_scan if pair_scan[n]["accepted"]]
             if acc2:
                 second = max(acc2, key=lambda n: pair_scan[n]["gain"]["gain"])

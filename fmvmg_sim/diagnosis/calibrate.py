@@ -65,10 +65,11 @@ class Calibration:
         -------
         dict
         """
+        pinned = self.at_bound
         return {"parameters": {k: {"value": float(v), "sd": float(self.sd[k]), "identifiable": bool(self.identifiable[k]),
-                                   "tolerance": KNOBS_BY_NAME[k].tolerance, "at_bound": k in self.at_bound}
+                                   "tolerance": KNOBS_BY_NAME[k].tolerance, "at_bound": k in pinned}
                                for k, v in self.theta.items()},
-                "at_bound": list(self.at_bound),
+                "at_bound": pinned,
                 "confounded_pairs": [{"a": a, "b": b, "corr": float(c)} for a, b, c in self.correlated],
                 "iterations": self.iterations}
 

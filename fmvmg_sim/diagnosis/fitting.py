@@ -10,6 +10,7 @@ effect columns) at the new point; the nominal columns are built once, at calibra
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -328,8 +329,27 @@ class Fitter:
         fl2 = (slope * die_floor_K) ** 2 + (rel_floor * swing[None, :]) ** 2
         self.S_score = np.sqrt(self.S ** 2 + fl2)
 
+    def residual(self, pred: np.ndarray, scoring: bool = False, Y: np.ndarray | None = None) -> np.ndarray:
+        """(observed - predicted) / sigma per block and channel; NaN for absent channels.
+
+        Parameters
+        ----------
+        pred : ndarray, shape (n, C)
+        scoring : bool, optional
+            Divide by the scoring sigma (model floor included) instead of the noise sigma.
+        Y : ndarray, optional
+            Other observations on the same blocks (a null replicate); default the record's.
+
+        Returns
+        -------
+        ndarray
+        """
+        Z = ((self.Y if Y is None else Y) - pred) / (self.S_score if scoring else self.S)
+        Z[:, ~self.present] = np.nan
+        return Z
+
     def scoring_residual(self, pred: np.ndarray) -> np.ndarray:
-        """(observed - predicted) / scoring sigma (model floor included); NaN for absent channels.
+        """:meth:`residual` with the scoring sigma.
 
         Parameters
         ----------
@@ -339,12 +359,10 @@ class Fitter:
         -------
         ndarray
         """
-        Z = (self.Y - pred) / self.S_score
-        Z[:, ~self.present] = np.nan
-        return Z
+        return self.residual(pred, scoring=True)
 
     def normalized_residual(self, pred: np.ndarray) -> np.ndarray:
-        """(observed - predicted) / sigma per block and channel (NaN for absent channels).
+        """:meth:`residual` with the noise sigma.
 
         Parameters
         ----------
@@ -354,9 +372,22 @@ class Fitter:
         -------
         ndarray
         """
-        Z = (self.Y - pred) / self.S
-        Z[:, ~self.present] = np.nan
-        return Z
+        return self.residual(pred)
+
+    @contextmanager
+    def extra_score_floor(self, floor: np.ndarray):
+        """Temporarily add ``floor`` (same shape as the blocks) to the scoring sigma, in quadrature.
+
+        Parameters
+        ----------
+        floor : ndarray, shape (n, C)
+        """
+        saved = self.S_score
+        self.S_score = np.sqrt(saved ** 2 + np.nan_to_num(floor) ** 2)
+        try:
+            yield
+        finally:
+            self.S_score = saved
 
 
 def transient_blocks(prep: Prepared) -> np.ndarray:

@@ -91,9 +91,9 @@ def check_units(rec: Record, prep: Prepared, scn: Scenario, nominal_pred: np.nda
                                  f"({m / max(p, 1e-30):.3g}x off): wrong unit or wrong device", f"{name}: {c}")
 
 
-def _metrics(prep: Prepared, fitter: Fitter, pred: np.ndarray, mask: np.ndarray) -> dict:
-    """Mean-square block residuals per metric on the blocks in ``mask``."""
-    R = fitter.Y - pred
+def _metrics(prep: Prepared, fitter: Fitter, pred: np.ndarray, mask: np.ndarray, Y: np.ndarray | None = None) -> dict:
+    """Mean-square block residuals per metric on the blocks in ``mask`` (of ``Y``, default the record's)."""
+    R = (fitter.Y if Y is None else Y) - pred
     out = {}
     sf = prep.sf_nominal_V_per_dps
     for i, c in enumerate(CHANNELS):
@@ -209,17 +209,11 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     for nr in nulls:
         Yn = np.column_stack([prep.block_mean(nr[c]) for c in CHANNELS])
         Yn[fitter.transient_b, IRATE] = np.nan  # as in the measured blocks
-        Zn = (Yn - pred_cal) / fitter.S
-        Zn[:, ~fitter.present] = np.nan
-        Zs = (Yn - pred_cal) / fitter.S_score
-        Zs[:, ~fitter.present] = np.nan
-        null_Z.append(Zs)
+        Zn = fitter.residual(pred_cal, Y=Yn)
+        null_Z.append(fitter.residual(pred_cal, scoring=True, Y=Yn))
         rr = _rate_residual(prep, pred_cal, nr["rate_V"])
         st_null.append(loc.residual_stats(prep, Zn, rr))
-        saved = fitter.Y
-        fitter.Y = Yn
-        null_ms.append(_metrics(prep, fitter, pred_cal, ho_b))
-        fitter.Y = saved
+        null_ms.append(_metrics(prep, fitter, pred_cal, ho_b, Y=Yn))
         null_ho_allan.append(loc.residual_stats(prep, Zn, rr, ho_b, ho_s).get("_allan", (None, np.array([])))[1])
         null_tr_allan.append(loc.residual_stats(prep, Zn, rr, ~ho_b, ~ho_s).get("_allan", (None, np.array([])))[1])
     noise_params = _null_noise_model(null_Z) if null_Z else None
