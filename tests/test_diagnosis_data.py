@@ -4,6 +4,7 @@ import numpy as np
 
 from fmvmg_sim.diagnosis.data import prepare
 from fmvmg_sim.diagnosis.fitting import transient_blocks
+from fmvmg_sim.diagnosis.forward import CHANNELS
 from fmvmg_sim.record import Record
 
 
@@ -32,3 +33,30 @@ def test_transient_blocks_and_static_mask():
     assert set(np.flatnonzero(tb)) == {19, 20, 21}
     quiet = prep.static_rate_samples(margin_s=30.0)
     assert quiet[:170].all() and not quiet[171:].any()  # the step lasts to the end
+
+
+def _quantised_record(noise_V, lsb_V=0.01, n=7200, seed=1):
+    rng = np.random.default_rng(seed)
+    t = np.arange(1.0, n + 1.0)
+    slow_V = 0.05 * np.sin(2 * np.pi * t / 5000.0)     # a slow drift over a few lsb
+    rate_V = np.round((slow_V + noise_V * rng.standard_normal(n)) / lsb_V) * lsb_V
+    cols = {"time_s": t, "temperature_C": np.full(n, 25.0), "rate_dps": rate_V / 0.01, "rate_V": rate_V,
+            "rate_true_dps": np.zeros(n)}
+    return Record(cols, {}), slow_V
+
+
+def test_coarse_recorder_sets_a_floor_on_block_means():
+    # noise far below the lsb: the block means follow a staircase of the drift, an error of
+    # L / sqrt(12) rms that no averaging removes; the floor is that, and the staircase residual
+    # of the smooth truth stays near unit variance against the block sigma
+    rec, slow_V = _quantised_record(noise_V=1e-4)
+    prep = prepare(rec, 0.01)
+    i = CHANNELS.index("rate_V")
+    assert abs(prep.lattice()[i] - 0.01) < 1e-9
+    assert abs(prep.quantization_floor()[i] - 0.01 / np.sqrt(12)) < 1e-4
+    z = (prep.block_obs()[:, i] - prep.block_mean(slow_V)) / prep.block_sigma()[:, i]
+    assert 0.3 < np.nanmean(z ** 2) < 1.5
+    # noise above the lsb dithers the quantiser: no floor beyond the noise itself
+    rec, _ = _quantised_record(noise_V=0.02)
+    prep = prepare(rec, 0.01)
+    assert prep.quantization_floor()[i] < 1e-6

@@ -1,4 +1,4 @@
-"""Localisation statistics against a few null replicates: Holm correction and the Allan sampling floor."""
+"""Localisation statistics against a few null replicates: Holm correction and the sampling-spread floors."""
 
 import numpy as np
 
@@ -8,7 +8,7 @@ from fmvmg_sim.diagnosis import localize as loc
 def _stats(band_value, floor=None):
     st = {"channels": {}, "allan_bands": {"random_walk": band_value}, "regimes": {}}
     if floor is not None:
-        st["_sd_floor"] = {"random_walk": floor}
+        st["_sd_floor"] = {"random_walk": (floor, 0.0)}
     return st
 
 
@@ -32,3 +32,36 @@ def test_holm_correction_scales_p_values():
     assert out["a"]["p_holm"] == min(1.0, 2 * out["a"]["p"])  # smallest p times the number of tests
     assert out["b"]["p_holm"] >= out["a"]["p_holm"]
 
+
+
+def test_window_spread_matches_analytic_for_white_and_correlated_noise():
+    # log of a mean square over n samples: spread sqrt(2 / EDF), EDF = n for white noise and
+    # n (1 - rho^2) / (1 + rho^2) for an AR(1) series
+    rng = np.random.default_rng(3)
+    n = 100
+    z = rng.standard_normal(200_000)
+    sd, windows = loc.window_log_ms_sd(z, n)
+    assert abs(sd / np.sqrt(2 / n) - 1) < 0.1 and windows == 2000
+    rho = 0.8
+    e = rng.standard_normal(400_000)
+    x = np.empty_like(e)
+    x[0] = e[0]
+    for k in range(1, len(e)):
+        x[k] = rho * x[k - 1] + np.sqrt(1 - rho ** 2) * e[k]
+    sd, _ = loc.window_log_ms_sd(x, n)
+    edf = n * (1 - rho ** 2) / (1 + rho ** 2)
+    assert abs(sd / np.sqrt(2 / edf) - 1) < 0.15
+    assert loc.window_log_ms_sd(z[:150], n) == (0.0, 0.0)  # fewer than two windows: no floor
+
+
+def test_regime_floor_from_null_windows():
+    # four nulls that agree by chance on a short regime: their windows say the spread is 0.35, so a
+    # 1.7x excess is not located; a 5x excess still is, on the windows' degrees of freedom
+    def st(v, floor=(0.35, 12.0)):
+        return {"channels": {}, "allan_bands": {}, "regimes": {"heating": v}, "_sd_floor": {"heating": floor}}
+    nulls = [st(v) for v in (3.7, 3.8, 3.9, 3.75)]
+    weak = loc.compare(st(6.5), nulls)["regimes"]["heating"]
+    strong = loc.compare(st(19.0), nulls)["regimes"]["heating"]
+    assert not weak["significant"] and strong["significant"]
+    bare = [{k: v for k, v in n.items() if k != "_sd_floor"} for n in nulls]
+    assert loc.compare(st(6.5), bare)["regimes"]["heating"]["significant"]  # without the floor: a false alarm

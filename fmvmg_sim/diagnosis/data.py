@@ -35,6 +35,39 @@ HOLD_K_PER_MIN = 0.05
 #: Model-accuracy floors per block (quasi-static model against the envelope engine, see the tests).
 FLOORS = {"rate_V": 2e-7, "quadrature_V": 2e-6, "drive_amplitude_V": 3e-7, "agc_effort_V": 1e-6,
           "drive_frequency_Hz": 3e-5}
+#: A channel is quantised when this fraction of its samples sits on the lattice found.
+ON_LATTICE_MIN = 0.9
+
+
+def lattice_lsb(x_V: np.ndarray) -> tuple[float, float]:
+    """Spacing of the lattice a quantised signal lives on, and the fraction of samples on it.
+
+    Parameters
+    ----------
+    x_V : ndarray
+
+    Returns
+    -------
+    lsb : float
+        0 when no lattice is found.
+    on_lattice : float
+        Fraction of samples within 2 % of an lsb of the lattice.
+    """
+    x = np.asarray(x_V, dtype=float)
+    x = x[np.isfinite(x)]
+    if len(x) < 100:
+        return 0.0, 0.0
+    d = np.abs(np.diff(x))
+    d = d[d > 1e-12 * max(np.max(np.abs(x)), 1e-30)]
+    if not len(d):
+        return 0.0, 0.0
+    q = np.quantile(d, 0.02)
+    small = d[d < 1.5 * q]
+    lsb = float(np.median(small))
+    if lsb <= 0:
+        return 0.0, 0.0
+    frac = np.abs(x / lsb - np.round(x / lsb))
+    return lsb, float(np.mean(frac < 0.02))
 
 
 @dataclass
@@ -162,8 +195,56 @@ class Prepared:
             self._cache["sig"] = s
         return self._cache["sig"]
 
+    def lattice_of(self, ch: str) -> tuple[float, float]:
+        """Lattice spacing of channel ``ch`` and the fraction of its samples on it (:func:`lattice_lsb`).
+
+        Parameters
+        ----------
+        ch : str
+
+        Returns
+        -------
+        lsb, on_lattice : float
+        """
+        key = ("lattice", ch)
+        if key not in self._cache:
+            self._cache[key] = lattice_lsb(self.obs[ch]) if ch in self.channels else (0.0, 0.0)
+        return self._cache[key]
+
+    def lattice(self) -> np.ndarray:
+        """The recorder's resolution per channel (0 where the samples are not on a lattice), shape (C,).
+
+        Returns
+        -------
+        ndarray
+        """
+        out = np.zeros(len(CHANNELS))
+        for i, c in enumerate(CHANNELS):
+            lsb, frac = self.lattice_of(c)
+            if frac >= ON_LATTICE_MIN:
+                out[i] = lsb
+        return out
+
+    def quantization_floor(self) -> np.ndarray:
+        """Block-mean error a coarse recorder leaves, per channel, shape (C,).
+
+        A slowly varying signal read through a quantiser of step ``L`` has a deterministic staircase
+        error (a sawtooth of the signal, rms ``L / sqrt(12)``) that a block mean does not average
+        away; noise dithers it, attenuating its fundamental by ``exp(-2 pi^2 sigma^2 / L^2)``. The
+        smooth forward model cannot follow the staircase, so the error is a floor on its accuracy.
+
+        Returns
+        -------
+        ndarray
+        """
+        L = self.lattice()
+        ws = np.nan_to_num(self.white_sigma())
+        with np.errstate(divide="ignore", invalid="ignore"):
+            att = np.where(L > 0, np.exp(-2.0 * np.pi ** 2 * ws ** 2 / np.where(L > 0, L, 1.0) ** 2), 0.0)
+        return L / np.sqrt(12.0) * att
+
     def block_sigma(self) -> np.ndarray:
-        """Noise level of each block mean: white level / sqrt(n) combined with the model floor.
+        """Noise level of each block mean: white level / sqrt(n) combined with the model and recorder floors.
 
         Returns
         -------
@@ -171,11 +252,12 @@ class Prepared:
         """
         if "bsig" not in self._cache:
             ws = self.white_sigma()
+            qf = self.quantization_floor()
             S = np.full((self.n_blocks, len(CHANNELS)), np.nan)
             for i, c in enumerate(CHANNELS):
                 if c in self.channels:
                     n = np.maximum(self.block_counts(c), 1)
-                    S[:, i] = np.sqrt(ws[i] ** 2 / n + FLOORS[c] ** 2)
+                    S[:, i] = np.sqrt(ws[i] ** 2 / n + FLOORS[c] ** 2 + qf[i] ** 2)
             self._cache["bsig"] = S
         return self._cache["bsig"]
 

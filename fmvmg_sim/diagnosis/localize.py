@@ -17,6 +17,7 @@ from scipy import stats
 from tqdm import tqdm
 
 from ..analysis.allan import allan_deviation
+from ..noise import quantize
 from ..profiles import PiecewiseProfile
 from .data import Prepared
 from .forward import CHANNELS, IQUAD, IRATE
@@ -61,6 +62,8 @@ def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool 
     Tp = np.concatenate([[prep.case_at_t_C[0]], prep.case_at_t_C[keep]])
     rp = np.concatenate([[prep.rate_true_dps[0]], prep.rate_true_dps[keep]])
     idx = np.clip(np.round(prep.t_s / dt).astype(int) - 1, 0, None)
+    # the record's own resolution (a coarser converter than the scenario's) applies to the null too
+    lattice = prep.lattice()
     out = []
     for k in tqdm(range(n), disable=not progress, file=sys.stderr, desc="null re-simulation", unit="run"):
         s = copy.copy(scn)
@@ -75,7 +78,7 @@ def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool 
         s.rate = PiecewiseProfile(tp, rp, [])
         res = run_envelope(s, progress=False, log=lambda m: None)
         i = np.clip(idx, 0, len(res.time_s) - 1)
-        out.append({c: np.asarray(res[c])[i] for c in CHANNELS})
+        out.append({c: quantize(np.asarray(res[c])[i], lattice[j]) for j, c in enumerate(CHANNELS)})
     return out
 
 
@@ -114,14 +117,16 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
         ``{group: {name: value}}`` with groups ``channels``, ``allan_bands``, ``regimes``.
     """
     mb = np.ones(prep.n_blocks, bool) if mask_b is None else mask_b
-    out = {"channels": {}, "allan_bands": {}, "regimes": {}}
+    out = {"channels": {}, "allan_bands": {}, "regimes": {}, "_sd_floor": {}}
     for i, c in enumerate(CHANNELS):
         if c in prep.channels:
             out["channels"][c] = float(np.nanmean(Zb[mb, i] ** 2))
+            out["_sd_floor"][c] = window_log_ms_sd(Zb[:, i], int(np.sum(mb & np.isfinite(Zb[:, i]))))
     for r in REGIMES:
         m = mb & prep.block_regime(r)
         if m.sum() >= 5:
             out["regimes"][r] = float(np.nanmean(Zb[m, IRATE] ** 2))
+            out["_sd_floor"][r] = window_log_ms_sd(Zb[:, IRATE], int(np.sum(m & np.isfinite(Zb[:, IRATE]))))
     # heating minus cooling at matched temperature (rate and quadrature)
     heat, cool = mb & prep.block_regime("heating"), mb & prep.block_regime("cooling")
     if heat.sum() >= 5 and cool.sum() >= 5:
@@ -154,9 +159,42 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
                 # sampling spread of log ADEV (about 1/sqrt(2 EDF), EDF ~ span/tau): a floor on the null's
                 # spread, which a few replicates estimate poorly where there are few averages
                 edf = np.maximum(span / taus[m] - 1.0, 1.0)
-                out.setdefault("_sd_floor", {})[b] = float(np.sqrt(np.mean(1.0 / (2.0 * edf))))
+                out["_sd_floor"][b] = (float(np.sqrt(np.mean(1.0 / (2.0 * edf)))), 0.0)
         out["_allan"] = (taus, adev)
     return out
+
+
+def window_log_ms_sd(z: np.ndarray, n: int) -> tuple[float, float]:
+    """Spread of ``log(mean(z**2))`` over windows of ``n`` consecutive samples of a (null) series.
+
+    A few null replicates estimate the spread of a short window's mean square poorly (a regime of a
+    hundred blocks of flicker-correlated rate residual varies by a factor of two from run to run);
+    sliding the window over each replicate samples it directly, whatever the correlation.
+
+    Parameters
+    ----------
+    z : ndarray
+        The whole series (NaN allowed).
+    n : int
+        Finite samples in the window.
+
+    Returns
+    -------
+    sd : float
+        0 when the series holds fewer than two independent windows.
+    windows : float
+        Independent windows the spread rests on (series length / n).
+    """
+    x = np.asarray(z, dtype=float)
+    ok = np.isfinite(x)
+    m = int(ok.sum())
+    if n < 5 or m < 2 * n:
+        return 0.0, 0.0
+    x2 = x[ok] ** 2
+    c = np.concatenate([[0.0], np.cumsum(x2)])
+    ms = (c[n:] - c[:-n]) / n
+    sd = float(np.std(np.log(np.maximum(ms, 1e-300))))
+    return sd, m / n
 
 
 def compare(measured: dict, nulls: list[dict], alpha: float = ALPHA) -> dict:
@@ -184,9 +222,20 @@ def compare(measured: dict, nulls: list[dict], alpha: float = ALPHA) -> dict:
             mv = np.log(max(v, 1e-300)) if logs else v
             rv = np.log(np.maximum(ref, 1e-300)) if logs else ref
             mu, sd = float(np.mean(rv)), float(np.std(rv, ddof=1))
-            sd = max(sd, 0.05, measured.get("_sd_floor", {}).get(name, 0.0) if g == "allan_bands" else 0.0)
+            # sampling-spread floor: Allan bands from the record's span (the same for every replicate);
+            # a window's mean square from sliding it over the null replicates (the measured residual
+            # carries the gap's own structure), resting on their independent windows
+            df = len(rv) - 1
+            if g == "allan_bands":
+                floor = measured.get("_sd_floor", {}).get(name, (0.0, 0.0))[0]
+            else:
+                fl = np.array([n.get("_sd_floor", {}).get(name, (np.nan, 0.0)) for n in nulls], dtype=float)
+                floor = float(np.sqrt(np.nanmean(fl[:, 0] ** 2))) if np.isfinite(fl[:, 0]).any() else 0.0
+                if floor > sd:
+                    df = max(df, int(np.nansum(fl[:, 1])) - 1)
+            sd = max(sd, 0.05, floor)
             z = (mv - mu) / (sd * np.sqrt(1 + 1 / len(rv)))
-            p = float(stats.t.sf(z, df=len(rv) - 1))
+            p = float(stats.t.sf(z, df=df))
             rows.append((g, name, v, mu, sd, z, p))
     # Holm
     order = np.argsort([r[6] for r in rows])

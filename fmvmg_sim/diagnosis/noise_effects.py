@@ -13,43 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .data import Prepared
+from .data import Prepared, lattice_lsb  # noqa: F401  (lattice_lsb re-exported)
 
 #: Excess flicker accepted when the held-out and training z-scores exceed these.
 FLICKER_Z_HELDOUT = 3.0
 FLICKER_Z_TRAIN = 2.0
 _FLICKER = (10.0, 300.0)
-
-
-def lattice_lsb(x_V: np.ndarray) -> tuple[float, float]:
-    """Spacing of the lattice a quantised signal lives on, and the fraction of samples on it.
-
-    Parameters
-    ----------
-    x_V : ndarray
-
-    Returns
-    -------
-    lsb : float
-        0 when no lattice is found.
-    on_lattice : float
-        Fraction of samples within 2 % of an lsb of the lattice.
-    """
-    x = np.asarray(x_V, dtype=float)
-    x = x[np.isfinite(x)]
-    if len(x) < 100:
-        return 0.0, 0.0
-    d = np.abs(np.diff(x))
-    d = d[d > 1e-12 * max(np.max(np.abs(x)), 1e-30)]
-    if not len(d):
-        return 0.0, 0.0
-    q = np.quantile(d, 0.02)
-    small = d[d < 1.5 * q]
-    lsb = float(np.median(small))
-    if lsb <= 0:
-        return 0.0, 0.0
-    frac = np.abs(x / lsb - np.round(x / lsb))
-    return lsb, float(np.mean(frac < 0.02))
 
 
 def quantization_candidate(prep: Prepared, nominal_lsb_V: float) -> dict | None:
@@ -65,7 +34,7 @@ def quantization_candidate(prep: Prepared, nominal_lsb_V: float) -> dict | None:
     dict or None
         ``{"lsb_V": ..., "on_lattice": ...}``.
     """
-    lsb, frac = lattice_lsb(prep.obs["rate_V"])
+    lsb, frac = prep.lattice_of("rate_V")
     if lsb > 1.5 * max(nominal_lsb_V, 1e-12) and frac > 0.9:
         return {"lsb_V": lsb, "on_lattice": frac}
     return None
