@@ -84,3 +84,22 @@ def test_out_of_library_gap_is_unexplained(tmp_path):
     assert rep["accepted"] == []
     groups = {s["group"] for s in rep["remainder"]["significant"]}
     assert groups & {"allan_bands", "regimes"}
+
+
+def test_signature_snr_counts_the_records_slow_noise(tmp_path):
+    # the detection limit is in units of the record's noise: a white model reproduces the white-noise
+    # SNR exactly, and the rate output's flicker wander (the noise model of a noise-only twin) lowers the
+    # SNR of a slow rate-channel signature (a temperature-rate term follows the oven, not the noise)
+    from fmvmg_sim.diagnosis.cases import noise_model, signature_snr
+    from fmvmg_sim.scenario import load_scenario
+    rec, _ = oven_record(tmp_path, "twin", seed=21, theta=THETA)
+    dev = load_scenario(NOMINAL).device_nominal
+    eff = {"temperature_rate": {"g_dph_per_K_per_min": 60.0}}
+    white = signature_snr(rec, NOMINAL, dev, THETA, eff)
+    assert white > 10
+    assert abs(signature_snr(rec, NOMINAL, dev, THETA, eff, noise=[(0.0, 1.0, 1.0)] * 5) / white - 1) < 1e-9
+    noise = noise_model(read_record(rec), dev, THETA)
+    rho, K, s = noise[0]                                    # rate channel: a slow state under white noise
+    assert rho > 0.8 and K < 0.6
+    coloured = signature_snr(rec, NOMINAL, dev, THETA, eff, noise=noise)
+    assert coloured < 0.5 * white

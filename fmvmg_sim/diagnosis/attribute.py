@@ -5,14 +5,16 @@ For each candidate: fit it jointly with the nominal parameters on each fold's tr
 negative log-likelihood with the nominal model's (fitted on the same blocks). A candidate is
 accepted when
 
-* the pooled held-out gain per block has a block-bootstrap 95 % interval above zero, and the
-  interval is above zero in at least 2 of the 3 folds;
+* the pooled held-out gain per block has a block-bootstrap 95 % interval above zero, and in at
+  least 2 of the 3 folds the interval is above zero and the fold's summed gain is at least
+  :data:`FOLD_MIN_NATS`;
 * Delta-BIC on the training window is below -10;
 * its parameters lie inside their physical bounds (not pinned at a bound);
 * at least one of its linear parameters is more than 2 noise-model standard errors from "no effect".
 
 Two effects: forward selection (the best accepted effect, then each other candidate jointly
-with it, scored against the one-effect model). Noise-level effects (quantisation, flicker) are
+with it, scored against the one-effect model); when no single effect passes, pairs fitted from
+scratch, each pair scored against each of its members alone. Noise-level effects (quantisation, flicker) are
 judged separately: the rate output's lattice, and the Allan flicker band against the null.
 """
 
@@ -32,6 +34,10 @@ from .model import NONLINEAR, EffectModel, ModelFit
 
 DELTA_BIC_MAX = -10.0
 FOLDS_NEEDED = 2
+#: A fold passes when its held-out log-likelihood gain (summed over its blocks) is at least this (odds of
+#: 20:1) with a bootstrap interval above zero: a smooth candidate that differs from the baseline by a
+#: hair has a "significant" but worthless gain of a fraction of a nat.
+FOLD_MIN_NATS = 3.0
 #: Candidates (positive held-out gain, none accepted) from which pairs are fitted from scratch.
 PAIR_STARTS = 2
 #: Relative accuracy of an accepted effect's model (a floor on the scoring sigma of a second effect).
@@ -174,13 +180,13 @@ class Scorer:
             by_ch.append(dch)
             diff = dch.sum(axis=1)
             lo, hi = block_bootstrap_ci(diff, seed=k)
-            folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi]})
+            folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi], "total": float(np.sum(diff))})
             allv.append(diff)
         pooled = np.concatenate(allv)
         lo, hi = block_bootstrap_ci(pooled, seed=99)
         ch = np.concatenate(by_ch).mean(axis=0)
         return {"gain": float(np.mean(pooled)), "ci": [lo, hi], "folds": folds,
-                "folds_passed": int(sum(f["ci"][0] > 0 for f in folds)),
+                "folds_passed": int(sum(f["ci"][0] > 0 and f["total"] >= FOLD_MIN_NATS for f in folds)),
                 "by_channel": {c: float(v) for c, v in zip(CHANNELS, ch) if self.f.present[CHANNELS.index(c)]}}
 
     def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int) -> float:
@@ -342,10 +348,13 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                 if n == a or key in pair_scan or (a in NONLINEAR and n in NONLINEAR):
                     continue
                 pair_scan[key] = evaluate(scorer, sorted((a, n)), base, scorer.nominal_train_pred)
-                # both must matter: each one's parameters significant in the joint fit
+                # both must matter: each one's parameters significant in the joint fit, and the pair
+                # must beat each member alone on held-out data (as a forward-selected second effect
+                # must beat the first): two look-alikes fitted against each other otherwise follow noise
                 ev = pair_scan[key]
                 if ev["accepted"]:
-                    ev["accepted"] = all(_significant_param(ev["fit"], [m]) for m in (a, n))
+                    ev["accepted"] = (all(_significant_param(ev["fit"], [m]) for m in (a, n))
+                                      and all(_beats(scorer, ev, single[m]) for m in (a, n)))
         acc2 = [k for k in pair_scan if pair_scan[k]["accepted"]]
         if acc2:
             k = max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"])
@@ -366,6 +375,14 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                         pair_alternatives[swapped].append(alt)
     return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan,
             "pair_alternatives": pair_alternatives}
+
+
+def _beats(scorer: Scorer, ev: dict, other: dict) -> bool:
+    """Whether evaluation ``ev`` has a held-out gain over ``other``'s predictions (interval above zero, enough folds)."""
+    if other.get("preds") is None:
+        return True
+    g = scorer.gain(ev["preds"], other["preds"])
+    return bool(g["ci"][0] > 0 and g["folds_passed"] >= scorer.folds_needed)
 
 
 def ambiguity(single: dict, best: str) -> list[str]:

@@ -6,12 +6,14 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
 * ``false_alarm_rate``: null cases where any effect was claimed (or the verdict was not "none");
 * ``top1`` / ``top2``: single-effect cases above the detection limit (SNR tier "above") whose effect
   is first / in the first two of the ranking, with a verdict other than "none";
-* ``pairs_exact``: two-effect cases whose accepted set equals the truth;
+* ``pairs_exact``: two-effect cases whose accepted set equals the truth (``pairs_exact_above``: both
+  members above the limit);
 * ``truth_in_ambiguity_set``: effect cases whose true effect is accepted or in an ambiguity set;
 * ``median_shrink``: held-out gap shrink of the accepted effect when the attribution is right;
 * ``param_rel_error_median``: relative error of the recovered parameters when right
   (:func:`param_errors`);
-* every rate also by SNR tier.
+* every rate also by SNR tier, and (``white_noise_tiers``) with the tiers of the former SNR definition
+  that counted white block noise only.
 """
 
 from __future__ import annotations
@@ -102,7 +104,8 @@ def score(labels: list[dict], results: list[dict]) -> dict:
         ranked = [] if err else res["ranked"]
         amb = set() if err else {x for v in res["ambiguous_with"].values() for x in v}
         claimed = (not err) and (res["verdict"] != "none" or bool(acc))
-        r = {"case": lab["case"], "truth": truth, "tier": lab["tier"], "snr": lab["snr"], "error": res.get("error"),
+        r = {"case": lab["case"], "truth": truth, "tier": lab["tier"], "tier_white": lab.get("tier_white", lab["tier"]),
+             "snr": lab["snr"], "error": res.get("error"),
              "verdict": None if err else res["verdict"], "accepted": acc}
         if not truth:
             r["false_alarm"] = bool(claimed)
@@ -134,6 +137,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
     out["top1"], out["single_above"] = rate("top1", lambda r: r["tier"] == "above")
     out["top2"], _ = rate("top2", lambda r: r["tier"] == "above")
     out["pairs_exact"], out["pair_cases"] = rate("pair_exact", lambda r: True)
+    out["pairs_exact_above"], out["pair_cases_above"] = rate("pair_exact", lambda r: r["tier"] == "above")
     out["pairs_at_least_one"], _ = rate("pair_one", lambda r: True)
     out["truth_in_ambiguity_set"], _ = rate("in_set", lambda r: r["tier"] == "above")
     sh = [r["shrink"] for r in rows if r.get("shrink") is not None]
@@ -147,6 +151,12 @@ def score(labels: list[dict], results: list[dict]) -> dict:
                              "top2": rate("top2", lambda r: r["tier"] == t)[0],
                              "pair_cases": rate("pair_exact", lambda r: r["tier"] == t)[1],
                              "pairs_exact": rate("pair_exact", lambda r: r["tier"] == t)[0]}
+    # the same rates with the tiers of the former SNR definition (white block noise only)
+    out["white_noise_tiers"] = {"single_above": rate("top1", lambda r: r["tier_white"] == "above")[1],
+                                "top1": rate("top1", lambda r: r["tier_white"] == "above")[0],
+                                "top2": rate("top2", lambda r: r["tier_white"] == "above")[0],
+                                "pair_cases_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[1],
+                                "pairs_exact_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[0]}
     out["rows"] = rows
     return out
 

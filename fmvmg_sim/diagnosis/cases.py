@@ -21,6 +21,7 @@ import numpy as np
 from ..effects import MODELS, validate_effects
 from ..profiles import PiecewiseProfile
 from ..record import atomic_write_text, write_record
+from .forward import CHANNELS
 from .parameters import NOMINAL_KNOBS, apply_nominal
 
 #: Case mix.
@@ -30,6 +31,8 @@ P_NULL, P_SINGLE = 0.20, 0.55
 SNR_TARGET = (1.0, 1000.0)
 #: Parameters that are not amplitudes (time constants, widths).
 NOT_SCALED = ("tau_s", "width_K", "tau_h")
+#: Effects that change only the noise (their SNR is analytic; they set the others' noise).
+NOISE_LEVEL = ("quantization", "flicker_noise")
 #: SNR tiers of the signature left after the nominal calibration absorbs what it can.
 SNR_TIERS = ((0.0, 3.0, "below"), (3.0, 10.0, "near"), (10.0, np.inf, "above"))
 
@@ -168,19 +171,39 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
         write_record(path, rec)
 
     # amplitudes scaled so that each effect's signature SNR hits the drawn target (log secant on the
-    # quasi-static SNR, which needs only the record's time, temperature and applied rate)
-    eff = validate_effects(drawn, "case")
-    simulate(eff)
+    # quasi-static SNR, which needs only the record's time, temperature and applied rate). Noise-level
+    # effects first (their SNR is analytic); the record's noise - white, flicker, a coarse converter -
+    # then sets the SNR of the deterministic signatures (slow-state model of a noise-only twin)
     scales, snr_by = {}, {}
     for n in effects:
-        scales[n], snr_by[n] = _scale_to(path, scenario_path, s.device_nominal, theta, {n: drawn[n]}, target)
+        if n in NOISE_LEVEL:
+            scales[n], snr_by[n] = _scale_to(path, scenario_path, s.device_nominal, theta, {n: drawn[n]}, target)
+    noise_eff = validate_effects({n: scaled({n: drawn[n]}, scales[n])[n] for n in scales}, "case")
+    twin = copy.copy(s)
+    twin.settings = copy.deepcopy(s.settings)
+    twin.settings["scenario"]["seed"] = int(rng.integers(0, 2 ** 31))
+    twin.device = EffectSet(noise_eff).apply_to_device(apply_nominal(scn.device_nominal, theta))
+    twin.effects = noise_eff
+    noise = noise_model(run_envelope(twin, progress=False, log=lambda m: None).to_record(), s.device_nominal, theta)
+    eff = validate_effects(drawn, "case")
+    simulate(eff)
+    for n in effects:
+        if n not in NOISE_LEVEL:
+            scales[n], snr_by[n] = _scale_to(path, scenario_path, s.device_nominal, theta, {n: drawn[n]}, target,
+                                             noise=noise)
     if effects and any(v != 1.0 for v in scales.values()):
         eff = validate_effects({n: scaled({n: drawn[n]}, scales[n])[n] for n in effects}, "case")
         simulate(eff)
     label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "amplitude_scale": scales,
              "snr_target": target if effects else 0.0, "snr_by_effect": snr_by,
-             "sim_seed": s.seed, "temperature_points": tp, "rate_points": rp}
-    label["snr"] = signature_snr(path, scenario_path, s.device_nominal, theta, eff) if effects else 0.0
+             "sim_seed": s.seed, "temperature_points": tp, "rate_points": rp,
+             "noise_model": {c: list(v) for c, v in zip(CHANNELS, noise) if v is not None}}
+    label["snr"] = signature_snr(path, scenario_path, s.device_nominal, theta, eff, noise=noise) if effects else 0.0
+    # the former definition (white block noise only), kept so that scores can be compared across it
+    white = {n: snr_by[n] if n in NOISE_LEVEL else signature_snr(path, scenario_path, s.device_nominal, theta,
+                                                                  {n: eff[n]}) for n in effects}
+    label["snr_white_by_effect"] = white
+    label["tier_white"] = tier(min(white.values())) if effects else "null"
     # a pair is as detectable as its weaker member
     label["tier"] = tier(min(snr_by.values())) if effects else "null"
     atomic_write_text(out / "labels" / f"case_{k:04d}.json", json.dumps(label, indent=1) + "\n")
@@ -188,10 +211,11 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
 
 
 def _scale_to(record_path, scenario_path, device_nominal, theta: dict, drawn: dict, target: float,
-              max_iter: int = 4) -> tuple[float, float]:
+              max_iter: int = 4, noise: list | None = None) -> tuple[float, float]:
     """Amplitude scale of ``drawn`` whose signature SNR is within 25 % of ``target`` (log secant)."""
     scale = 1.0
-    snr = signature_snr(record_path, scenario_path, device_nominal, theta, validate_effects(drawn, "case"))
+    snr = signature_snr(record_path, scenario_path, device_nominal, theta, validate_effects(drawn, "case"),
+                        noise=noise)
     hist = [(scale, snr)]
     for _ in range(max_iter):
         if snr <= 0 or abs(np.log(snr / target)) < np.log(1.25):
@@ -201,7 +225,7 @@ def _scale_to(record_path, scenario_path, device_nominal, theta: dict, drawn: di
             p_ = float(np.clip(np.log(hist[-1][1] / hist[-2][1]) / np.log(hist[-1][0] / hist[-2][0]), 0.25, 3.0))
         scale = float(np.clip(scale * (target / snr) ** (1.0 / p_), 1e-4, 1e3))
         snr = signature_snr(record_path, scenario_path, device_nominal, theta,
-                            validate_effects(scaled(drawn, scale), "case"))
+                            validate_effects(scaled(drawn, scale), "case"), noise=noise)
         hist.append((scale, snr))
     return scale, float(snr)
 
@@ -227,12 +251,52 @@ def scaled(effects: dict, scale: float) -> dict:
     return out
 
 
-def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effects: dict) -> float:
+def noise_model(record, device_nominal, theta: dict) -> list:
+    """Slow-state noise model ``(rho, K, s)`` per channel of a noise-only record's block residual.
+
+    The record is the case's device (nominal deviations and noise-level effects, no deterministic
+    effect) simulated with noise; its blocks, normalised by their white sigma, against the noise-free
+    quasi-static model hold the white noise, the flicker wander and the converter's staircase.
+
+    Parameters
+    ----------
+    record : Record
+    device_nominal : Device
+    theta : dict
+
+    Returns
+    -------
+    list
+        One ``(rho, K, s)`` per channel of :data:`fmvmg_sim.diagnosis.forward.CHANNELS` (None if absent),
+        ``s`` floored at 0.05 as in the diagnosis.
+    """
+    from ..averaged import scale_factor_V_per_dps
+    from ..diagram import build_diagram
+    from .data import prepare
+    from .fitting import Fitter
+    from .likelihood import slow_state_fit
+    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
+    fit = Fitter(prepare(record, sf), device_nominal)
+    Z = fit.residual(fit.table(theta).evaluate(fit.path(None)["die_b"], fit.rate_b))
+    out = []
+    for c in range(Z.shape[1]):
+        if np.isfinite(Z[:, c]).sum() > 10:
+            rho, K, s = slow_state_fit([Z[:, c]])
+            out.append((rho, K, max(s, 0.05)))  # as the diagnosis's noise model: a near-exact channel
+        else:                                     # must not whiten a signature into thousands of sigma
+            out.append(None)
+    return out
+
+
+def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effects: dict,
+                  noise: list | None = None) -> float:
     """Signal-to-noise ratio of the effects' signature that the nominal calibration cannot absorb.
 
     The noise-free truth (quasi-static model of the perturbed device with the effects) replaces the
-    record's blocks; the calibrated nominal model's weighted residual norm ``sqrt(chi^2)`` is the SNR.
-    Noise-level effects: ``10 x`` their added variance over the nominal one in their band.
+    record's blocks; the calibrated nominal model's residual, whitened by the record's noise model
+    (white, flicker and converter noise: :func:`noise_model`; white block noise alone without one),
+    has norm ``sqrt(chi^2)``: the SNR. Noise-level effects: ``10 x`` their added variance over the
+    nominal one in their band.
 
     Parameters
     ----------
@@ -240,6 +304,8 @@ def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effec
     scenario_path : path-like
     device_nominal : Device
     theta, effects : dict
+    noise : list, optional
+        Per-channel ``(rho, K, s)`` from :func:`noise_model`.
 
     Returns
     -------
@@ -274,4 +340,10 @@ def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effec
     truth[:, ~fit.present] = np.nan
     fit.Y = truth
     cal = calibrate(fit, np.ones(prep.n_blocks, bool))
-    return float(max(np.sqrt(cal.solution.cost), snr_noise))
+    if noise is None:
+        return float(max(np.sqrt(cal.solution.cost), snr_noise))
+    from .likelihood import innovations
+    R = fit.residual(cal.lin.predict(cal.solution.x))
+    chi2 = sum(float(np.nansum((innovations(R[:, c], p[0], p[1]) / p[2]) ** 2))
+               for c, p in enumerate(noise) if p is not None and np.isfinite(R[:, c]).any())
+    return float(max(np.sqrt(chi2), snr_noise))
