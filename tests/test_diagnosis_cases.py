@@ -103,3 +103,14 @@ def test_signature_snr_counts_the_records_slow_noise(tmp_path):
     assert rho > 0.8 and K < 0.6
     coloured = signature_snr(rec, NOMINAL, dev, THETA, eff, noise=noise)
     assert coloured < 0.5 * white
+
+
+def test_scaled_cases_stay_clear_of_physical_bounds():
+    # a case's amplitude scaled past its bound is clipped inside it, where the diagnosis's
+    # "not pinned at a bound" rule can accept a right answer; time constants are left alone
+    from fmvmg_sim.diagnosis.attribute import _in_bounds
+    from fmvmg_sim.diagnosis.cases import scaled
+    eff = scaled({"stress_relaxation": {"quad_rel": -0.1, "tau_h": 20.0}}, 5.0)
+    assert -0.2 < eff["stress_relaxation"]["quad_rel"] <= -0.19 and eff["stress_relaxation"]["tau_h"] == 20.0
+    assert _in_bounds(eff)
+    assert not _in_bounds({"stress_relaxation": {"quad_rel": -0.2, "tau_h": 20.0}})

@@ -31,6 +31,9 @@ P_NULL, P_SINGLE = 0.20, 0.55
 SNR_TARGET = (1.0, 1000.0)
 #: Parameters that are not amplitudes (time constants, widths).
 NOT_SCALED = ("tau_s", "width_K", "tau_h")
+#: Fraction of an amplitude's physical range kept clear of its non-zero bounds in the cases (20x the
+#: diagnosis's pin tolerance).
+BOUND_MARGIN = 0.02
 #: Effects that change only the noise (their SNR is analytic; they set the others' noise).
 NOISE_LEVEL = ("quantization", "flicker_noise")
 #: SNR tiers of the signature left after the nominal calibration absorbs what it can.
@@ -92,6 +95,25 @@ def random_profile(rng: np.random.Generator, duration_s: float) -> tuple[list, l
     return pts, rpts
 
 
+def inside(spec) -> tuple[float, float]:
+    """The physical range of an amplitude pulled in by :data:`BOUND_MARGIN` of its width at non-zero bounds.
+
+    A drawn or scaled value is clipped to this range: the diagnosis rejects a fit pinned at a
+    physical bound (a zero bound is "no effect", not a pin), so a true value on the bound would be
+    a case no admissible answer can get right.
+
+    Parameters
+    ----------
+    spec : fmvmg_sim.effects.Param
+
+    Returns
+    -------
+    lo, hi : float
+    """
+    w = BOUND_MARGIN * (spec.hi - spec.lo)
+    return (spec.lo + w if spec.lo != 0.0 else 0.0), (spec.hi - w if spec.hi != 0.0 else 0.0)
+
+
 def draw_effect(rng: np.random.Generator, name: str, scale: float) -> dict:
     """Parameters of one effect from its prior ranges, with its amplitude parameters scaled.
 
@@ -113,7 +135,7 @@ def draw_effect(rng: np.random.Generator, name: str, scale: float) -> dict:
             v *= scale
             if s.signed and rng.random() < 0.5:
                 v = -v
-        out[p] = float(np.clip(v, s.lo, s.hi))
+        out[p] = float(np.clip(v, *(inside(s) if p not in NOT_SCALED else (s.lo, s.hi))))
     return out
 
 
@@ -247,7 +269,7 @@ def scaled(effects: dict, scale: float) -> dict:
         out[n] = {}
         for p, v in ps.items():
             sp = MODELS[n][p]
-            out[n][p] = float(np.clip(v * scale, sp.lo, sp.hi)) if p not in NOT_SCALED else v
+            out[n][p] = float(np.clip(v * scale, *inside(sp))) if p not in NOT_SCALED else v
     return out
 
 
