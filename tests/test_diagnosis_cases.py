@@ -103,6 +103,10 @@ def test_signature_snr_counts_the_records_slow_noise(tmp_path):
     assert rho > 0.8 and K < 0.6
     coloured = signature_snr(rec, NOMINAL, dev, THETA, eff, noise=noise)
     assert coloured < 0.5 * white
+    # a drive-frequency signature (Duffing), where the block sigma is a model floor: never credited
+    # beyond its white-noise SNR
+    duff = {"duffing": {"k3_rel": 3e-6}}
+    assert signature_snr(rec, NOMINAL, dev, THETA, duff, noise=noise) <= signature_snr(rec, NOMINAL, dev, THETA, duff)
 
 
 def test_scaled_cases_stay_clear_of_physical_bounds():

@@ -290,7 +290,7 @@ def noise_model(record, device_nominal, theta: dict) -> list:
     -------
     list
         One ``(rho, K, s)`` per channel of :data:`fmvmg_sim.diagnosis.forward.CHANNELS` (None if absent),
-        ``s`` floored at 0.05 as in the diagnosis.
+        ``s`` floored at 1 (the block sigma).
     """
     from ..averaged import scale_factor_V_per_dps
     from ..diagram import build_diagram
@@ -304,8 +304,11 @@ def noise_model(record, device_nominal, theta: dict) -> list:
     for c in range(Z.shape[1]):
         if np.isfinite(Z[:, c]).sum() > 10:
             rho, K, s = slow_state_fit([Z[:, c]])
-            out.append((rho, K, max(s, 0.05)))  # as the diagnosis's noise model: a near-exact channel
-        else:                                     # must not whiten a signature into thousands of sigma
+            # the innovation sd is floored at the block sigma: the whitening may discount a slow signature
+            # that slow noise hides, but never credit one beyond its white-noise SNR (a channel whose block
+            # sigma is a model floor, like the drive frequency, would otherwise be whitened into 100s of sigma)
+            out.append((rho, K, max(s, 1.0)))
+        else:
             out.append(None)
     return out
 
