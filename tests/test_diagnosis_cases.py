@@ -107,6 +107,10 @@ def test_signature_snr_counts_the_records_slow_noise(tmp_path):
     # beyond its white-noise SNR
     duff = {"duffing": {"k3_rel": 3e-6}}
     assert signature_snr(rec, NOMINAL, dev, THETA, duff, noise=noise) <= signature_snr(rec, NOMINAL, dev, THETA, duff)
+    # aiming a Duffing term at an SNR its oscillation cannot reach backs off instead of failing the case
+    from fmvmg_sim.diagnosis.cases import _scale_to
+    scale, snr = _scale_to(rec, NOMINAL, dev, THETA, {"duffing": {"k3_rel": 3e-4}}, 800.0, noise=noise)
+    assert scale > 1.0 and 0 < snr < 800.0
 
 
 def test_scaled_cases_stay_clear_of_physical_bounds():

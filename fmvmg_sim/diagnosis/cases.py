@@ -234,10 +234,20 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
 
 def _scale_to(record_path, scenario_path, device_nominal, theta: dict, drawn: dict, target: float,
               max_iter: int = 4, noise: list | None = None) -> tuple[float, float]:
-    """Amplitude scale of ``drawn`` whose signature SNR is within 25 % of ``target`` (log secant)."""
+    """Amplitude scale of ``drawn`` whose signature SNR is within 25 % of ``target`` (log secant).
+
+    A step that takes the device outside the quasi-static model's domain (no steady oscillation,
+    e.g. a Duffing term at its bound) is halved in log scale towards the last good one."""
+    def snr_at(sc):
+        try:
+            return signature_snr(record_path, scenario_path, device_nominal, theta,
+                                 validate_effects(scaled(drawn, sc), "case"), noise=noise)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            return None
     scale = 1.0
-    snr = signature_snr(record_path, scenario_path, device_nominal, theta, validate_effects(drawn, "case"),
-                        noise=noise)
+    snr = snr_at(scale)
+    if snr is None:
+        raise ValueError(f"effects {sorted(drawn)} at their drawn amplitudes are outside the model's domain")
     hist = [(scale, snr)]
     for _ in range(max_iter):
         if snr <= 0 or abs(np.log(snr / target)) < np.log(1.25):
@@ -245,9 +255,16 @@ def _scale_to(record_path, scenario_path, device_nominal, theta: dict, drawn: di
         p_ = 1.0
         if len(hist) > 1 and hist[-1][1] > 0 and hist[-2][1] > 0 and hist[-1][0] != hist[-2][0]:
             p_ = float(np.clip(np.log(hist[-1][1] / hist[-2][1]) / np.log(hist[-1][0] / hist[-2][0]), 0.25, 3.0))
-        scale = float(np.clip(scale * (target / snr) ** (1.0 / p_), 1e-4, 1e3))
-        snr = signature_snr(record_path, scenario_path, device_nominal, theta,
-                            validate_effects(scaled(drawn, scale), "case"), noise=noise)
+        new = float(np.clip(scale * (target / snr) ** (1.0 / p_), 1e-4, 1e3))
+        s_new = snr_at(new)
+        for _back in range(4):
+            if s_new is not None:
+                break
+            new = float(np.sqrt(new * scale))
+            s_new = snr_at(new)
+        if s_new is None:
+            break
+        scale, snr = new, s_new
         hist.append((scale, snr))
     return scale, float(snr)
 
