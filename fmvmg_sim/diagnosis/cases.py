@@ -2,7 +2,8 @@
 
 A case is the nominal device perturbed within its unit-to-unit tolerances, plus zero, one or two
 library effects with parameters drawn from their prior ranges (random sign where either is
-plausible) and their amplitudes scaled so that the signature's signal-to-noise ratio hits a target
+plausible) and their amplitudes scaled so that the signature's signal-to-noise ratio - in units of
+the record's own noise, flicker and converter included (:func:`signature_snr`) - hits a target
 drawn log-uniformly from below to well above the detection limit (:data:`SNR_TARGET`), simulated
 with the envelope engine and a fresh noise seed on a random temperature profile (holds and ramps
 at random temperatures and rates, sometimes rate-table steps). Records go to

@@ -5,6 +5,9 @@ on the record's own temperature and rate, a few times with fresh seeds; each nul
 through the same residual statistics as the measured one. A statistic is significant when it
 lies above its null distribution (Student-t on the log statistic, ``M - 1`` degrees of freedom),
 after Holm's correction across all statistics (channels x Allan bands x regimes x direction).
+A few replicates estimate a spread poorly, so it is floored: an Allan band at the sampling spread of
+an Allan deviation (1/sqrt(2 EDF)), a window's mean square at its spread over all windows of the same
+length slid along the replicates (on their independent windows' degrees of freedom).
 """
 
 from __future__ import annotations
