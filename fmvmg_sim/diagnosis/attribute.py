@@ -95,7 +95,7 @@ class Scorer:
     cal : Calibration
     noise_params : list of (rho, s), optional
         AR(1) noise model of each channel's block residual normalised by the scoring sigma
-        (:meth:`~.fitting.Fitter.scoring_residual`: noise plus a per-channel model floor), from the
+        (:meth:`~.fitting.Fitter.residual` with ``scoring=True``: noise plus a per-channel model floor), from the
         null re-simulations; without it each model's own training residual sets it (a smooth misfit
         then looks cheap).
     """
@@ -154,7 +154,7 @@ class Scorer:
         -------
         list of (rho, s) or None
         """
-        Z = self.f.scoring_residual(base_pred)[rows]
+        Z = self.f.residual(base_pred, scoring=True)[rows]
         return self.noise_params or fit_params(Z)
 
     def gain(self, cand: dict, base: dict) -> dict:
@@ -174,7 +174,7 @@ class Scorer:
             d = []
             par = self.channel_noise(base["folds"][k][0], fd["train"])
             for pred in (base["folds"][k][0], cand["folds"][k][0]):
-                Z = self.f.scoring_residual(pred)
+                Z = self.f.residual(pred, scoring=True)
                 d.append(nll_by_channel(Z[fd["test"]], par))
             dch = d[0] - d[1]
             by_ch.append(dch)
@@ -204,9 +204,9 @@ class Scorer:
         rows = self.train
         v = []
         for pred in (pred_cand, pred_base):
-            Z = self.f.scoring_residual(pred)[rows]
+            Z = self.f.residual(pred, scoring=True)[rows]
             v.append(float(np.sum(nll(Z, self.noise_params or fit_params(Z)))))
-        n = int(np.isfinite(self.f.scoring_residual(pred_base)[rows]).sum())
+        n = int(np.isfinite(self.f.residual(pred_base, scoring=True)[rows]).sum())
         return 2 * (v[0] - v[1]) + k_extra * np.log(max(n, 2))
 
 

@@ -243,9 +243,10 @@ class Prepared:
         """
         L = self.lattice()
         ws = np.nan_to_num(self.white_sigma())
-        with np.errstate(divide="ignore", invalid="ignore"):
-            att = np.where(L > 0, np.exp(-2.0 * np.pi ** 2 * ws ** 2 / np.where(L > 0, L, 1.0) ** 2), 0.0)
-        return L / np.sqrt(12.0) * att
+        out = np.zeros_like(L)
+        q = L > 0
+        out[q] = L[q] / np.sqrt(12.0) * np.exp(-2.0 * np.pi ** 2 * ws[q] ** 2 / L[q] ** 2)
+        return out
 
     def block_sigma(self) -> np.ndarray:
         """Noise level of each block mean: white level / sqrt(n) combined with the model and recorder floors.

@@ -348,32 +348,6 @@ class Fitter:
         Z[:, ~self.present] = np.nan
         return Z
 
-    def scoring_residual(self, pred: np.ndarray) -> np.ndarray:
-        """:meth:`residual` with the scoring sigma.
-
-        Parameters
-        ----------
-        pred : ndarray, shape (n, C)
-
-        Returns
-        -------
-        ndarray
-        """
-        return self.residual(pred, scoring=True)
-
-    def normalized_residual(self, pred: np.ndarray) -> np.ndarray:
-        """:meth:`residual` with the noise sigma.
-
-        Parameters
-        ----------
-        pred : ndarray, shape (n, C)
-
-        Returns
-        -------
-        ndarray
-        """
-        return self.residual(pred)
-
     @contextmanager
     def extra_score_floor(self, floor: np.ndarray):
         """Temporarily add ``floor`` (same shape as the blocks) to the scoring sigma, in quadrature.

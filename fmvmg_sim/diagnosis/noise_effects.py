@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .data import Prepared, lattice_lsb  # noqa: F401  (lattice_lsb re-exported)
+from .data import Prepared
+from .forward import IRATE
 
 #: Excess flicker accepted when the held-out and training z-scores exceed these.
 FLICKER_Z_HELDOUT = 3.0
@@ -34,9 +35,9 @@ def quantization_candidate(prep: Prepared, nominal_lsb_V: float) -> dict | None:
     dict or None
         ``{"lsb_V": ..., "on_lattice": ...}``.
     """
-    lsb, frac = prep.lattice_of("rate_V")
-    if lsb > 1.5 * max(nominal_lsb_V, 1e-12) and frac > 0.9:
-        return {"lsb_V": lsb, "on_lattice": frac}
+    lsb = prep.lattice()[IRATE]
+    if lsb > 1.5 * max(nominal_lsb_V, 1e-12):
+        return {"lsb_V": lsb, "on_lattice": prep.lattice_of("rate_V")[1]}
     return None
 
 

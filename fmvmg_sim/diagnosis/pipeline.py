@@ -202,7 +202,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     for fd in folds:
         ho_b |= fd["test"]
     ho_s = prep.heldout_mask_samples()
-    Z_meas = fitter.normalized_residual(pred_cal)
+    Z_meas = fitter.residual(pred_cal)
     rr_meas = _rate_residual(prep, pred_cal, prep.obs["rate_V"])
     st_meas = loc.residual_stats(prep, Z_meas, rr_meas)
     st_null, null_ms, null_ho_allan, null_tr_allan, null_Z = [], [], [], [], []
