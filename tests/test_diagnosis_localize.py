@@ -3,6 +3,7 @@
 import numpy as np
 
 from fmvmg_sim.diagnosis import localize as loc
+from tests.test_diagnosis_helpers import NOMINAL
 
 
 def _stats(band_value, floor=None):
@@ -65,3 +66,19 @@ def test_regime_floor_from_null_windows():
     assert not weak["significant"] and strong["significant"]
     bare = [{k: v for k, v in n.items() if k != "_sd_floor"} for n in nulls]
     assert loc.compare(st(6.5), bare)["regimes"]["heating"]["significant"]  # without the floor: a false alarm
+
+
+def test_null_replicates_carry_the_calibration_error(tmp_path):
+    """A null record whose last heating ramp runs 20 K past the training window's temperatures.
+
+    The calibrated nominal model extrapolates there with its estimation error; the null replicates,
+    each calibrated on its own training window, carry the same error. Against the calibrated model's
+    own prediction (no estimation error) the heating regime stood at z = 3.9 ("unexplained")."""
+    from fmvmg_sim.diagnosis.cases import make_case
+    from fmvmg_sim.diagnosis.pipeline import diagnose
+    label = make_case(28, 4242, tmp_path, str(NOMINAL))
+    assert not label["effects"]
+    rep = diagnose(label["record"], NOMINAL, n_null=4, progress=False, log=lambda m: None)
+    assert rep["verdict"] == "none", rep["remainder"]
+    z = rep["localization"]["regimes"]["heating"]["z"]
+    assert z < 2.0, z
