@@ -72,8 +72,9 @@ def test_null_replicates_carry_the_calibration_error(tmp_path):
     """A null record whose last heating ramp runs 20 K past the training window's temperatures.
 
     The calibrated nominal model extrapolates there with its estimation error; the null replicates,
-    each calibrated on its own training window, carry the same error. Against the calibrated model's
-    own prediction (no estimation error) the heating regime stood at z = 3.9 ("unexplained")."""
+    simulated with knobs drawn from the calibration's spread (white-noise posterior plus a
+    delete-a-segment jackknife), carry the same error. Replicates of the calibrated model itself (no
+    estimation error) left the heating regime at z = 3.9 ("unexplained")."""
     from fmvmg_sim.diagnosis.cases import make_case
     from fmvmg_sim.diagnosis.pipeline import diagnose
     label = make_case(28, 4242, tmp_path, str(NOMINAL))

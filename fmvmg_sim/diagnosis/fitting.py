@@ -253,7 +253,7 @@ class Fitter:
                              else -BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]),
                    np.array([BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]))
 
-    def solve(self, lin: Lin, rows: np.ndarray, Y: np.ndarray | None = None) -> Solution:
+    def solve(self, lin: Lin, rows: np.ndarray) -> Solution:
         """Weighted, prior-regularised, bounded linear least squares on the blocks in ``rows``.
 
         Parameters
@@ -261,15 +261,13 @@ class Fitter:
         lin : Lin
         rows : ndarray of bool
             Blocks to fit.
-        Y : ndarray, optional
-            Block observations to fit (default: the record's).
 
         Returns
         -------
         Solution
         """
         W = 1.0 / self.S[rows]
-        r0 = ((self.Y if Y is None else Y)[rows] - lin.y0[rows]) * W
+        r0 = (self.Y[rows] - lin.y0[rows]) * W
         A = lin.cols[rows] * W[:, :, None]
         ok = np.isfinite(r0) & self.present[None, :]
         b = r0[ok]

@@ -39,8 +39,8 @@ def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool 
     ----------
     scn : Scenario
         The nominal scenario (noise switches, engine settings).
-    device : Device
-        The calibrated device.
+    device : Device or list of Device
+        The calibrated device, or one device per replicate (e.g. drawn from the calibration's posterior).
     prep : Prepared
     n : int
     seed : int
@@ -74,7 +74,7 @@ def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool 
         s.settings["scenario"].update(duration_s=float(prep.t_s[-1]), output_rate_Hz=1.0 / dt, seed=int(seed + k),
                                       fidelity="envelope")
         s.settings["initial"]["state"] = "steady"
-        s.device = device
+        s.device = device[k] if isinstance(device, (list, tuple)) else device
         s.device_nominal = scn.device_nominal
         s.effects = {}
         s.temperature = PiecewiseProfile(tp, Tp, [])

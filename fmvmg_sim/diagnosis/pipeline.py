@@ -149,6 +149,48 @@ def _null_noise_model(null_Z: list) -> list:
     return out
 
 
+#: Contiguous segments of the training window left out in turn for the calibration's jackknife.
+JACKKNIFE_SEGMENTS = 6
+
+
+def posterior_draws(cal, fitter: Fitter, rows: np.ndarray, n: int, seed: int) -> list[dict]:
+    """Nominal knobs drawn around the calibration with its estimation spread, inside the calibration bounds.
+
+    The spread is the Laplace (white-noise) posterior plus a delete-a-segment jackknife: the calibration is
+    re-solved (linearised) without each of :data:`JACKKNIFE_SEGMENTS` contiguous stretches of its training
+    window. Slow noise (the rate output's flicker wander) and the temperatures a stretch alone covers move the
+    estimate far more than white noise would; the jackknife sees both.
+
+    Parameters
+    ----------
+    cal : Calibration
+    fitter : Fitter
+    rows : ndarray of bool
+        The calibration's training blocks.
+    n, seed : int
+
+    Returns
+    -------
+    list of dict
+    """
+    lin = cal.lin
+    x0 = np.asarray(cal.solution.x, float)
+    idx = np.flatnonzero(rows)
+    xs = []
+    for seg in np.array_split(idx, JACKKNIFE_SEGMENTS):
+        sub = rows.copy()
+        sub[seg] = False
+        xs.append(fitter.solve(lin, sub).x)
+    xs = np.asarray(xs)
+    k = len(xs)
+    C = np.asarray(cal.solution.cov, float) + (k - 1) / k * (xs - xs.mean(axis=0)).T @ (xs - xs.mean(axis=0))
+    w, V = np.linalg.eigh(0.5 * (C + C.T))
+    L = V * np.sqrt(np.clip(w, 0.0, None))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E756C6C]))
+    return [dict(zip(lin.names, map(float, np.clip(x0 + L @ rng.standard_normal(len(x0)), lin.lo, lin.hi))))
+            for _ in range(n)]
+
+
 def _rate_residual(prep: Prepared, pred_b: np.ndarray, rate_V: np.ndarray) -> np.ndarray:
     tb = prep.block_time_s()
     return (rate_V - np.interp(prep.t_mid_s, tb, pred_b[:, IRATE])) / prep.sf_nominal_V_per_dps
@@ -199,7 +241,12 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     pred_cal = cal.lin.predict(cal.solution.x)
     fitter.set_score_floor(cal.base, fitter.path(None)["die_b"], DIE_FLOOR_K, REL_FLOOR)
     # 2. the null: the calibrated nominal model re-simulated with its noise on the record's inputs
-    nulls = loc.null_records(scn, fitter.device(cal.theta), prep, n_null, seed, progress=show)
+    # each replicate's device is drawn from the calibration's posterior: the record's residual against the
+    # calibrated model carries the calibration's estimation error (largest where it extrapolates to held-out
+    # temperatures, and where the prior, not the data, holds a knob), so the localisation null must too
+    thetas = posterior_draws(cal, fitter, train, n_null, seed)
+    nulls = loc.null_records(scn, [fitter.device(th) for th in thetas], prep, n_null, seed, progress=show)
+    die_b = fitter.path(None)["die_b"]
     ho_b = np.zeros(prep.n_blocks, bool)
     for fd in folds:
         ho_b |= fd["test"]
@@ -208,18 +255,19 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     rr_meas = _rate_residual(prep, pred_cal, prep.obs["rate_V"])
     st_meas = loc.residual_stats(prep, Z_meas, rr_meas)
     st_null, null_ms, null_ho_allan, null_tr_allan, null_Z = [], [], [], [], []
-    for nr in nulls:
+    for th, nr in zip(thetas, nulls):
         Yn = np.column_stack([prep.block_mean(nr[c]) for c in CHANNELS])
         Yn[fitter.transient_b, IRATE] = np.nan  # as in the measured blocks
-        null_Z.append(fitter.residual(pred_cal, scoring=True, Y=Yn))
-        # the replicate calibrated on its own training window (linearised at the record's calibration):
-        # its residual then carries the calibration's estimation error, extrapolated into the held-out
-        # temperatures, as the record's does
-        pred_n = cal.lin.predict(fitter.solve(cal.lin, train, Y=Yn).x)
-        Zn = fitter.residual(pred_n, Y=Yn)
-        rr = _rate_residual(prep, pred_n, nr["rate_V"])
-        st_null.append(loc.residual_stats(prep, Zn, rr))
-        null_ms.append(_metrics(prep, fitter, pred_cal, ho_b, Y=Yn))
+        # localisation: against the calibrated model, as the record
+        st_null.append(loc.residual_stats(prep, fitter.residual(pred_cal, Y=Yn),
+                                          _rate_residual(prep, pred_cal, nr["rate_V"])))
+        # noise alone (against the replicate's own device): the scoring noise model, the metrics' noise
+        # level and the flicker band
+        pred_k = fitter.table(th).evaluate(die_b, fitter.rate_b)
+        Zn = fitter.residual(pred_k, Y=Yn)
+        rr = _rate_residual(prep, pred_k, nr["rate_V"])
+        null_Z.append(fitter.residual(pred_k, scoring=True, Y=Yn))
+        null_ms.append(_metrics(prep, fitter, pred_k, ho_b, Y=Yn))
         null_ho_allan.append(loc.residual_stats(prep, Zn, rr, ho_b, ho_s).get("_allan", (None, np.array([])))[1])
         null_tr_allan.append(loc.residual_stats(prep, Zn, rr, ~ho_b, ~ho_s).get("_allan", (None, np.array([])))[1])
     noise_params = _null_noise_model(null_Z) if null_Z else None
