@@ -299,7 +299,8 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
     dict
         ``single``: {effect: evaluation}; ``selected``: list of effect names; ``final``: evaluation of the
         selected set (or None); ``pair_scan``: {effect: evaluation with the first};
-        ``pair_alternatives``: {member of a pair fitted from scratch: look-alikes that could replace it}.
+        ``pair_alternatives``: {member of a pair (fitted from scratch, or a forward-selected second effect):
+        look-alikes that could replace it}.
     """
     base = scorer.nominal
     single = {}
@@ -331,6 +332,9 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                 second = max(acc2, key=lambda n: pair_scan[n]["gain"]["gain"])
                 selected.append(second)
                 final = pair_scan[second]
+                # look-alike second effects: others that explain the same remaining gap as well
+                if (alts := ambiguity(pair_scan, second)):
+                    pair_alternatives[second] = alts
     elif max_effects > 1:
         # no single effect passes, but a pair may: each alone mis-fits the other's signature (pinned at a
         # bound, or extrapolating badly); start from the strongest candidates and fit pairs from scratch
@@ -391,6 +395,7 @@ def ambiguity(single: dict, best: str) -> list[str]:
     Parameters
     ----------
     single : dict
+        Evaluations by effect: single effects against the nominal model, or second effects beside a first.
     best : str
 
     Returns

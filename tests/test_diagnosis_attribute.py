@@ -1,0 +1,29 @@
+"""Attribution bookkeeping: ambiguity sets and the physical-bound rule (the fits are tested end to end)."""
+
+from fmvmg_sim.diagnosis.attribute import _in_bounds, ambiguity, separating_experiment
+
+
+def _ev(gain, lo, inb=True, fit=True):
+    return {"fit": object() if fit else None, "in_bounds": inb, "gain": {"gain": gain, "ci": [lo, gain + 1.0]}}
+
+
+def test_ambiguity_set_is_the_best_ones_interval():
+    evals = {"q_factor_drift": _ev(10.0, 6.0), "reference_drift": _ev(9.5, 5.0),   # inside: look-alike
+             "demod_phase_drift": _ev(2.0, 1.0),                                   # below the interval
+             "feedthrough": _ev(9.0, 4.0, inb=False),                              # pinned at a bound
+             "duffing": _ev(7.0, -0.5),                                            # interval reaches zero
+             "thermal_lag": _ev(8.0, 3.0, fit=False)}                              # no fit
+    assert ambiguity(evals, "q_factor_drift") == ["reference_drift"]
+    assert ambiguity(evals, "reference_drift") == ["q_factor_drift"]
+
+
+def test_pinned_and_zero_bounds():
+    assert _in_bounds({"feedthrough": {"c_ft_fF": 0.0, "tc_per_K": 0.0}})          # zero: "no effect", not a pin
+    assert not _in_bounds({"feedthrough": {"c_ft_fF": 1.0, "tc_per_K": -0.01}})    # at a non-zero bound
+    assert not _in_bounds({"feedthrough": {"c_ft_fF": 1.0, "tc_per_K": 0.02}})     # outside
+
+
+def test_separating_experiment_is_symmetric():
+    a = separating_experiment("reference_drift", "q_factor_drift")
+    assert a == separating_experiment("q_factor_drift", "reference_drift")
+    assert "set-point" in a
