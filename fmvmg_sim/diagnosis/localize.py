@@ -32,17 +32,16 @@ REGIMES = ("hold", "heating", "cooling", "post_ramp_hold", "settled_hold")
 ALPHA = 0.05
 
 
-def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool = False) -> list[dict]:
-    """Simulate the calibrated nominal model with noise on the record's inputs, ``n`` times.
+def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool = False) -> list[dict]:
+    """Simulate the calibrated nominal model with noise on the record's inputs, once per device.
 
     Parameters
     ----------
     scn : Scenario
         The nominal scenario (noise switches, engine settings).
-    device : Device or list of Device
-        The calibrated device, or one device per replicate (e.g. drawn from the calibration's posterior).
+    devices : list of Device
+        One device per replicate (the calibrated one, or draws from the calibration's spread).
     prep : Prepared
-    n : int
     seed : int
     progress : bool, optional
 
@@ -68,13 +67,14 @@ def null_records(scn, device, prep: Prepared, n: int, seed: int, progress: bool 
     # the record's own resolution (a coarser converter than the scenario's) applies to the null too
     lattice = prep.lattice()
     out = []
-    for k in tqdm(range(n), disable=not progress, file=sys.stderr, desc="null re-simulation", unit="run"):
+    bar = tqdm(devices, disable=not progress, file=sys.stderr, desc="null re-simulation", unit="run")
+    for k, device in enumerate(bar):
         s = copy.copy(scn)
         s.settings = copy.deepcopy(scn.settings)
         s.settings["scenario"].update(duration_s=float(prep.t_s[-1]), output_rate_Hz=1.0 / dt, seed=int(seed + k),
                                       fidelity="envelope")
         s.settings["initial"]["state"] = "steady"
-        s.device = device[k] if isinstance(device, (list, tuple)) else device
+        s.device = device
         s.device_nominal = scn.device_nominal
         s.effects = {}
         s.temperature = PiecewiseProfile(tp, Tp, [])

@@ -181,9 +181,9 @@ def posterior_draws(cal, fitter: Fitter, rows: np.ndarray, n: int, seed: int) ->
         sub = rows.copy()
         sub[seg] = False
         xs.append(fitter.solve(lin, sub).x)
-    xs = np.asarray(xs)
-    k = len(xs)
-    C = np.asarray(cal.solution.cov, float) + (k - 1) / k * (xs - xs.mean(axis=0)).T @ (xs - xs.mean(axis=0))
+    D = np.asarray(xs) - np.mean(xs, axis=0)
+    k = len(D)
+    C = np.asarray(cal.solution.cov, float) + (k - 1) / k * D.T @ D
     w, V = np.linalg.eigh(0.5 * (C + C.T))
     L = V * np.sqrt(np.clip(w, 0.0, None))
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6E756C6C]))
@@ -231,7 +231,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     sf = scale_factor_V_per_dps(build_diagram(scn.device_nominal, scn.device_nominal.reference_temperature_C))
     prep = prepare(rec, sf)
     fitter = Fitter(prep, scn.device_nominal)
-    nominal_pred = fitter.table({}).evaluate(fitter.path(None)["die_b"], fitter.rate_b)
+    die_b = fitter.path(None)["die_b"]
+    nominal_pred = fitter.table({}).evaluate(die_b, fitter.rate_b)
     check_units(rec, prep, scn, nominal_pred)
     show = progress if progress is not None else prep.duration_s > 4 * 3600
     # 1. calibration on the training window
@@ -239,14 +240,13 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     train = folds[-1]["train"]
     cal = calibrate(fitter, train)
     pred_cal = cal.lin.predict(cal.solution.x)
-    fitter.set_score_floor(cal.base, fitter.path(None)["die_b"], DIE_FLOOR_K, REL_FLOOR)
+    fitter.set_score_floor(cal.base, die_b, DIE_FLOOR_K, REL_FLOOR)
     # 2. the null: the calibrated nominal model re-simulated with its noise on the record's inputs
     # each replicate's device is drawn from the calibration's posterior: the record's residual against the
     # calibrated model carries the calibration's estimation error (largest where it extrapolates to held-out
     # temperatures, and where the prior, not the data, holds a knob), so the localisation null must too
     thetas = posterior_draws(cal, fitter, train, n_null, seed)
-    nulls = loc.null_records(scn, [fitter.device(th) for th in thetas], prep, n_null, seed, progress=show)
-    die_b = fitter.path(None)["die_b"]
+    nulls = loc.null_records(scn, [fitter.device(th) for th in thetas], prep, seed, progress=show)
     ho_b = np.zeros(prep.n_blocks, bool)
     for fd in folds:
         ho_b |= fd["test"]
