@@ -27,3 +27,17 @@ def test_separating_experiment_is_symmetric():
     a = separating_experiment("reference_drift", "q_factor_drift")
     assert a == separating_experiment("q_factor_drift", "reference_drift")
     assert "set-point" in a
+
+
+def test_fold_rule_counts_only_folds_that_can_test():
+    from fmvmg_sim.diagnosis.attribute import Scorer
+
+    sc = Scorer.__new__(Scorer)
+    sc.folds_needed = 2
+
+    def g(passed, testable):
+        return {"folds_passed": passed, "folds_testable": testable, "folds": [{}] * 3}
+    assert sc.folds_ok(g(2, 3)) and not sc.folds_ok(g(1, 3))
+    assert sc.folds_ok(g(1, 1))            # a ramp-rate term tested on the one fold with a ramp
+    assert not sc.folds_ok(g(0, 0))        # nothing can test it: never accepted
+    assert not sc.folds_ok(g(0, 1))

@@ -48,3 +48,29 @@ def test_block_length_grows_with_correlation_and_ci_widens():
     lo_s, hi_s = block_bootstrap_ci(slow)
     # the interval of the correlated series reflects its ~10 effective samples, not 600
     assert (hi_s - lo_s) > 3 * (hi_w - lo_w)
+
+
+def test_expected_gain_is_the_kl_divergence():
+    from fmvmg_sim.diagnosis.likelihood import ar1_nll_terms, expected_gain
+
+    n, d = 200, 0.3
+    # white noise: half the summed squared change
+    dz = np.full((n, 1), d)
+    assert np.isclose(expected_gain(dz, [(0.0, 1.0)]), 0.5 * n * d * d)
+    # AR(1), rho, s: a constant offset is mostly absorbed (first block stationary, then (1 - rho) d)
+    rho, s = 0.9, 0.5
+    want = 0.5 * ((1 - rho ** 2) * d * d + (n - 1) * ((1 - rho) * d) ** 2) / s ** 2
+    assert np.isclose(expected_gain(dz, [(rho, s)]), want)
+    # and equals the mean NLL gain a baseline loses to the truth over many noise draws
+    rng = np.random.default_rng(1)
+    gains = []
+    for _ in range(400):
+        w = rng.normal(scale=s, size=n)
+        z = np.empty(n)
+        z[0] = w[0] / np.sqrt(1 - rho ** 2)
+        for t in range(1, n):
+            z[t] = rho * z[t - 1] + w[t]
+        gains.append(np.sum(ar1_nll_terms(z + d, rho, s) - ar1_nll_terms(z, rho, s)))
+    assert abs(np.mean(gains) - want) < 4 * np.std(gains) / np.sqrt(len(gains))
+    # a skipped channel carries nothing
+    assert expected_gain(np.column_stack([dz[:, 0], dz[:, 0]]), [None, (0.0, 1.0)]) == expected_gain(dz, [(0.0, 1.0)])

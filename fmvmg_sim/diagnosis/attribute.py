@@ -6,8 +6,11 @@ negative log-likelihood with the nominal model's (fitted on the same blocks). A 
 accepted when
 
 * the pooled held-out gain per block has a block-bootstrap 95 % interval above zero, and in at
-  least 2 of the 3 folds the interval is above zero and the fold's summed gain is at least
-  :data:`FOLD_MIN_NATS`;
+  least 2 of the folds that can test it (all of them if fewer, at least one) the interval is above zero
+  and the fold's summed gain is at least :data:`FOLD_MIN_NATS`. A fold can test a candidate when the
+  candidate, were it true, would gain at least :data:`FOLD_INFO_NATS` there (its held-out blocks carry
+  its signature: a ramp-rate term cannot be tested on a hold, nor a weak second effect on blocks where
+  the first one's model error hides it);
 * Delta-BIC on the training window is below -10;
 * its parameters lie inside their physical bounds (not pinned at a bound);
 * at least one of its linear parameters is more than 2 noise-model standard errors from "no effect".
@@ -29,7 +32,7 @@ from ..effects import MODELS
 from .calibrate import Calibration
 from .fitting import DEVICE_EFFECTS, PATH_EFFECTS, Fitter
 from .forward import CHANNELS
-from .likelihood import block_bootstrap_ci, fit_params, nll, nll_by_channel
+from .likelihood import block_bootstrap_ci, expected_gain, fit_params, nll, nll_by_channel
 from .model import NONLINEAR, EffectModel, ModelFit
 
 DELTA_BIC_MAX = -10.0
@@ -38,6 +41,10 @@ FOLDS_NEEDED = 2
 #: 20:1) with a bootstrap interval above zero: a smooth candidate that differs from the baseline by a
 #: hair has a "significant" but worthless gain of a fraction of a nat.
 FOLD_MIN_NATS = 3.0
+#: Expected held-out gain (nats) of a candidate over its baseline, were the candidate true, below which a fold
+#: cannot test it: with ``I`` nats expected the gain scatters by about ``sqrt(2 I)``, so a fold expecting
+#: fewer than 10 nats fails a true effect's interval test about as often as it passes it.
+FOLD_INFO_NATS = 10.0
 #: Candidates (positive held-out gain, none accepted) from which pairs are fitted from scratch.
 PAIR_STARTS = 2
 #: Relative accuracy of an accepted effect's model (a floor on the scoring sigma of a second effect).
@@ -167,27 +174,48 @@ class Scorer:
         Returns
         -------
         dict
-            ``gain``, ``ci``, ``folds`` (per-fold gain and interval), ``folds_passed``.
+            ``gain``, ``ci``, ``folds`` (per fold: gain, interval, total, ``info_if_true``, ``testable``),
+            ``folds_passed`` (of the testable folds), ``folds_testable``, ``by_channel``.
         """
         allv, folds, by_ch = [], [], []
         for k, fd in enumerate(self.folds):
-            d = []
             par = self.channel_noise(base["folds"][k][0], fd["train"])
-            for pred in (base["folds"][k][0], cand["folds"][k][0]):
-                Z = self.f.residual(pred, scoring=True)
-                d.append(nll_by_channel(Z[fd["test"]], par))
-            dch = d[0] - d[1]
+            Zb, Zc = (self.f.residual(pred, scoring=True)[fd["test"]] for pred in (base["folds"][k][0],
+                                                                                 cand["folds"][k][0]))
+            dch = nll_by_channel(Zb, par) - nll_by_channel(Zc, par)
             by_ch.append(dch)
             diff = dch.sum(axis=1)
             lo, hi = block_bootstrap_ci(diff, seed=k)
-            folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi], "total": float(np.sum(diff))})
+            # the gain expected were the candidate true: the baseline's residual would then be the
+            # candidate's prediction change (plus noise); its whitened energy is the Kullback-Leibler
+            # divergence between the two predictive distributions on the held-out blocks
+            info = expected_gain(Zb - Zc, par)
+            folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi], "total": float(np.sum(diff)),
+                          "info_if_true": info, "testable": bool(info >= FOLD_INFO_NATS)})
             allv.append(diff)
         pooled = np.concatenate(allv)
         lo, hi = block_bootstrap_ci(pooled, seed=99)
         ch = np.concatenate(by_ch).mean(axis=0)
+        testable = [f for f in folds if f["testable"]]
         return {"gain": float(np.mean(pooled)), "ci": [lo, hi], "folds": folds,
-                "folds_passed": int(sum(f["ci"][0] > 0 and f["total"] >= FOLD_MIN_NATS for f in folds)),
+                "folds_passed": int(sum(f["ci"][0] > 0 and f["total"] >= FOLD_MIN_NATS for f in testable)),
+                "folds_testable": len(testable),
                 "by_channel": {c: float(v) for c, v in zip(CHANNELS, ch) if self.f.present[CHANNELS.index(c)]}}
+
+    def folds_ok(self, g: dict) -> bool:
+        """Enough folds passed: :data:`FOLDS_NEEDED` of those that can test the candidate (at least one).
+
+        Parameters
+        ----------
+        g : dict
+            From :meth:`gain`.
+
+        Returns
+        -------
+        bool
+        """
+        n = g.get("folds_testable", len(g.get("folds", [])))
+        return bool(n >= 1 and g["folds_passed"] >= min(self.folds_needed, n))
 
     def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int) -> float:
         """BIC(candidate) - BIC(base) on the training window (AR(1) likelihood).
@@ -278,7 +306,7 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
     dbic = scorer.delta_bic(mf._ctx["pred"], base_pred_train, k)
     inb = _in_bounds(mf.effects)
     sig = _significant_param(mf, list(new if new is not None else names))
-    acc = bool(g["ci"][0] > 0 and g["folds_passed"] >= scorer.folds_needed and dbic < DELTA_BIC_MAX and inb and sig)
+    acc = bool(g["ci"][0] > 0 and scorer.folds_ok(g) and dbic < DELTA_BIC_MAX and inb and sig)
     return {"names": list(names), "fit": mf, "preds": preds, "gain": g, "delta_bic": float(dbic),
             "in_bounds": inb, "param_significant": sig, "accepted": acc}
 
@@ -340,7 +368,7 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
         # bound, or extrapolating badly); start from the strongest candidates and fit pairs from scratch
         fitted = [n for n in single if single[n]["fit"] is not None]
         starts = sorted((n for n in fitted if single[n]["gain"]["ci"][0] > 0
-                         and single[n]["gain"]["folds_passed"] >= scorer.folds_needed),
+                         and scorer.folds_ok(single[n]["gain"])),
                         key=lambda n: -single[n]["gain"]["gain"])[:PAIR_STARTS]
         # also the best training fits: an effect whose held-out score suffers from the other one's
         # unmodelled signature (the calibration bent to absorb it) still fits its training window well
@@ -386,7 +414,7 @@ def _beats(scorer: Scorer, ev: dict, other: dict) -> bool:
     if other.get("preds") is None:
         return True
     g = scorer.gain(ev["preds"], other["preds"])
-    return bool(g["ci"][0] > 0 and g["folds_passed"] >= scorer.folds_needed)
+    return bool(g["ci"][0] > 0 and scorer.folds_ok(g))
 
 
 def ambiguity(single: dict, best: str) -> list[str]:

@@ -183,6 +183,29 @@ def nll_by_channel(Z: np.ndarray, params: list[tuple[float, float]]) -> np.ndarr
     return out
 
 
+def expected_gain(dZ: np.ndarray, params: list) -> float:
+    """Held-out NLL gain expected of a candidate over its baseline were the candidate true.
+
+    With the truth equal to the candidate's prediction, the baseline's normalised residual is the
+    prediction change ``dZ`` plus noise; for a Gaussian model with a common noise process the expected
+    NLL difference is the Kullback-Leibler divergence, half the squared whitened innovations of ``dZ``.
+
+    Parameters
+    ----------
+    dZ : ndarray, shape (n, C)
+        Baseline minus candidate normalised residual (NaN counts as no change).
+    params : list of (rho, s) or (rho, K, s)
+        Noise model per column (None to skip).
+
+    Returns
+    -------
+    float
+        Nats (>= 0).
+    """
+    dZ = np.nan_to_num(np.asarray(dZ, dtype=float))
+    return float(np.sum(nll_by_channel(dZ, params) - nll_by_channel(np.zeros_like(dZ), params)))
+
+
 def fit_params(Z: np.ndarray) -> list:
     """AR(1) parameters of every column with finite data.
 
