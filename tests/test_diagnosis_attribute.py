@@ -29,15 +29,20 @@ def test_separating_experiment_is_symmetric():
     assert "set-point" in a
 
 
-def test_fold_rule_counts_only_folds_that_can_test():
+def test_fold_rule_two_folds_or_the_only_testable_one():
     from fmvmg_sim.diagnosis.attribute import Scorer
 
     sc = Scorer.__new__(Scorer)
     sc.folds_needed = 2
 
-    def g(passed, testable):
-        return {"folds_passed": passed, "folds_testable": testable, "folds": [{}] * 3}
-    assert sc.folds_ok(g(2, 3)) and not sc.folds_ok(g(1, 3))
-    assert sc.folds_ok(g(1, 1))            # a ramp-rate term tested on the one fold with a ramp
-    assert not sc.folds_ok(g(0, 0))        # nothing can test it: never accepted
-    assert not sc.folds_ok(g(0, 1))
+    def fold(testable, passed, consistent=True):
+        return {"testable": testable, "passed": passed, "consistent": consistent}
+
+    def g(*folds):
+        return {"folds": list(folds), "folds_passed": sum(f["passed"] for f in folds)}
+    assert sc.folds_ok(g(fold(True, True), fold(False, True), fold(True, False)))
+    assert not sc.folds_ok(g(fold(True, True), fold(True, False), fold(False, False)))
+    # a ramp-rate term tested on the one fold with a ramp: it must pass and earn what it would if true
+    assert sc.folds_ok(g(fold(True, True), fold(False, False), fold(False, False)))
+    assert not sc.folds_ok(g(fold(True, True, consistent=False), fold(False, False), fold(False, False)))
+    assert not sc.folds_ok(g(fold(False, True), fold(False, False), fold(False, False)))  # nothing can test it

@@ -6,11 +6,12 @@ negative log-likelihood with the nominal model's (fitted on the same blocks). A 
 accepted when
 
 * the pooled held-out gain per block has a block-bootstrap 95 % interval above zero, and in at
-  least 2 of the folds that can test it (all of them if fewer, at least one) the interval is above zero
-  and the fold's summed gain is at least :data:`FOLD_MIN_NATS`. A fold can test a candidate when the
-  candidate, were it true, would gain at least :data:`FOLD_INFO_NATS` there (its held-out blocks carry
-  its signature: a ramp-rate term cannot be tested on a hold, nor a weak second effect on blocks where
-  the first one's model error hides it);
+  least 2 of the 3 folds the interval is above zero and the fold's summed gain is at least
+  :data:`FOLD_MIN_NATS`; or, when only one fold can test the candidate, that fold passes with the gain
+  the candidate would earn were it true. A fold can test a candidate when the candidate, were it true,
+  would gain at least :data:`FOLD_INFO_NATS` there (its held-out blocks carry its signature: a ramp-rate
+  term cannot be tested on a hold, nor a weak second effect on blocks where the first one's model error
+  hides it);
 * Delta-BIC on the training window is below -10;
 * its parameters lie inside their physical bounds (not pinned at a bound);
 * at least one of its linear parameters is more than 2 noise-model standard errors from "no effect".
@@ -45,6 +46,9 @@ FOLD_MIN_NATS = 3.0
 #: cannot test it: with ``I`` nats expected the gain scatters by about ``sqrt(2 I)``, so a fold expecting
 #: fewer than 10 nats fails a true effect's interval test about as often as it passes it.
 FOLD_INFO_NATS = 10.0
+#: Relative model accuracy allowed when checking a fold's gain against the gain expected were the candidate
+#: true (beside the noise scatter ``3 sqrt(2 I)``); see :meth:`Scorer.folds_ok`.
+FOLD_CONSISTENCY_REL = 0.25
 #: Candidates (positive held-out gain, none accepted) from which pairs are fitted from scratch.
 PAIR_STARTS = 2
 #: Relative accuracy of an accepted effect's model (a floor on the scoring sigma of a second effect).
@@ -190,20 +194,30 @@ class Scorer:
             # candidate's prediction change (plus noise); its whitened energy is the Kullback-Leibler
             # divergence between the two predictive distributions on the held-out blocks
             info = expected_gain(Zb - Zc, par)
-            folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi], "total": float(np.sum(diff)),
-                          "info_if_true": info, "testable": bool(info >= FOLD_INFO_NATS)})
+            tot = float(np.sum(diff))
+            # were the candidate true, the fold's gain would scatter about ``info`` by sqrt(2 info)
+            consistent = abs(tot - info) <= 3.0 * np.sqrt(2.0 * info) + FOLD_CONSISTENCY_REL * info
+            folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi], "total": tot,
+                          "info_if_true": info, "testable": bool(info >= FOLD_INFO_NATS),
+                          "consistent": bool(consistent)})
             allv.append(diff)
         pooled = np.concatenate(allv)
         lo, hi = block_bootstrap_ci(pooled, seed=99)
         ch = np.concatenate(by_ch).mean(axis=0)
-        testable = [f for f in folds if f["testable"]]
+        for f in folds:
+            f["passed"] = bool(f["ci"][0] > 0 and f["total"] >= FOLD_MIN_NATS)
         return {"gain": float(np.mean(pooled)), "ci": [lo, hi], "folds": folds,
-                "folds_passed": int(sum(f["ci"][0] > 0 and f["total"] >= FOLD_MIN_NATS for f in testable)),
-                "folds_testable": len(testable),
+                "folds_passed": int(sum(f["passed"] for f in folds)),
+                "folds_testable": int(sum(f["testable"] for f in folds)),
                 "by_channel": {c: float(v) for c, v in zip(CHANNELS, ch) if self.f.present[CHANNELS.index(c)]}}
 
     def folds_ok(self, g: dict) -> bool:
-        """Enough folds passed: :data:`FOLDS_NEEDED` of those that can test the candidate (at least one).
+        """Enough folds passed: :data:`FOLDS_NEEDED`, or the one fold that can test the candidate.
+
+        Where a single fold can test it (a ramp-rate term beside a record of holds, a weak second effect
+        that the first one's model error hides elsewhere), that fold must pass and its gain must also be
+        what the candidate would earn were it true: a gain far above it comes from a larger misfit (slow
+        noise, another effect) the candidate merely leans against.
 
         Parameters
         ----------
@@ -214,8 +228,10 @@ class Scorer:
         -------
         bool
         """
-        n = g.get("folds_testable", len(g.get("folds", [])))
-        return bool(n >= 1 and g["folds_passed"] >= min(self.folds_needed, n))
+        if g["folds_passed"] >= self.folds_needed:
+            return True
+        testable = [f for f in g["folds"] if f.get("testable")]
+        return bool(len(testable) == 1 and testable[0]["passed"] and testable[0]["consistent"])
 
     def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int) -> float:
         """BIC(candidate) - BIC(base) on the training window (AR(1) likelihood).

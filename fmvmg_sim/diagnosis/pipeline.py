@@ -289,7 +289,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                            "heldout_gain": None, "error": ev.get("error")})
             continue
         after = _gaps(_metrics(prep, fitter, ev["preds"]["heldout"], ho_b), noise_ms)
-        ranked.append(_row(name, ev, before, after, primary))
+        ranked.append(_row(name, ev, before, after, primary, cal.theta))
     # noise-level effects
     final_pred_ho = att["final"]["preds"]["heldout"] if att["final"] else nominal_ho
     final_pred_tr = att["final"]["fit"]._ctx["pred"] if att["final"] else pred_cal
@@ -392,7 +392,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     return report
 
 
-def _row(name: str, ev: dict, before: dict, after: dict, primary: str) -> dict:
+def _row(name: str, ev: dict, before: dict, after: dict, primary: str, cal_theta: dict) -> dict:
     mf = ev["fit"]
     sh = _shrink(before, after)
     return {"effect": name, "params": mf.effects[name], "param_sd": mf.sd.get(name, {}),
@@ -401,5 +401,6 @@ def _row(name: str, ev: dict, before: dict, after: dict, primary: str) -> dict:
             "heldout_gain": ev["gain"]["gain"], "heldout_gain_ci": ev["gain"]["ci"],
             "folds_passed": ev["gain"]["folds_passed"], "delta_bic": ev["delta_bic"], "in_bounds": ev["in_bounds"],
             "param_significant": ev["param_significant"],
-            "nominal_shift": {k: float(v - ev["fit"].theta.get(k, 0.0)) for k, v in {}.items()},
+            # how far the nominal knobs move from their calibration when the effect is fitted beside them
+            "nominal_shift": {k: float(ev["fit"].theta[k] - v) for k, v in cal_theta.items() if k in ev["fit"].theta},
             "shrink_by_metric": sh}
