@@ -83,3 +83,43 @@ def test_null_replicates_carry_the_calibration_error(tmp_path):
     assert rep["verdict"] == "none", rep["remainder"]
     z = rep["localization"]["regimes"]["heating"]["z"]
     assert z < 2.0, z
+
+
+def _oven_prep():
+    from fmvmg_sim.diagnosis.data import prepare
+    from fmvmg_sim.record import Record
+
+    t = np.arange(0.0, 10800.0, 1.0)
+    # ramp up at 1 K/min, 1 h hold, ramp down at 0.5 K/min, hold
+    T = np.interp(t, [0, 2400, 6000, 9600, 10800], [20.0, 60.0, 60.0, 30.0, 30.0])
+    rec = Record({"time_s": t, "temperature_C": T, "rate_dps": np.zeros_like(t)})
+    return prepare(rec, 0.01)
+
+
+def test_flicker_band_ignores_a_leftover_gradient_term():
+    # a temperature-rate leftover (an unmodelled gradient term, steps at every ramp end) raises the
+    # 10-300 s Allan band of a white residual and reads as extra flicker; the slow templates remove it,
+    # while slow noise in the band is still found
+    from fmvmg_sim.diagnosis.noise_effects import band_excess
+
+    prep = _oven_prep()
+    n = len(prep.t_s)
+    Zb = np.zeros((prep.n_blocks, 5))
+    rng = np.random.default_rng(7)
+    sigma = 0.01  # deg/s per sample
+
+    def allan(x, detrend):
+        return loc.residual_stats(prep, Zb, x, detrend=detrend)["_allan"]
+    nulls = {d: [allan(sigma * rng.standard_normal(n), d)[1] for _ in range(4)] for d in (False, True)}
+    leftover = 0.02 * prep.dTdt_K_per_min  # 0.02 deg/s per K/min: 72 deg/h per K/min
+    x = sigma * rng.standard_normal(n) + leftover
+    z_raw = band_excess(*allan(x, False), nulls[False], span_s=n)[1]
+    z_det = band_excess(*allan(x, True), nulls[True], span_s=n)[1]
+    assert z_raw > 3.0 > z_det
+    # slow noise (AR(1), 100 s correlation, 3x the white level over the band) is still seen
+    a = np.exp(-1.0 / 100.0)
+    e = rng.standard_normal(n) * 3 * sigma * np.sqrt(1 - a * a)
+    slow = np.zeros(n)
+    for k in range(1, n):
+        slow[k] = a * slow[k - 1] + e[k]
+    assert band_excess(*allan(sigma * rng.standard_normal(n) + slow, True), nulls[True], span_s=n)[1] > 3.0

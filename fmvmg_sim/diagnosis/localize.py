@@ -101,7 +101,7 @@ def noise_mask(prep: Prepared) -> np.ndarray:
 
 
 def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mask_b: np.ndarray | None = None,
-                   mask_s: np.ndarray | None = None) -> dict:
+                   mask_s: np.ndarray | None = None, detrend: bool = False) -> dict:
     """The localisation statistics of one residual (measured or null).
 
     Parameters
@@ -113,6 +113,9 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
         Full-rate rate residual (deg/s), NaN where missing.
     mask_b, mask_s : ndarray of bool, optional
         Restrict to these blocks / samples.
+    detrend : bool, optional
+        Remove the rate residual's least-squares fit on :func:`slow_templates` before its Allan deviation
+        (a stochastic band test then ignores what is left of a deterministic temperature signature).
 
     Returns
     -------
@@ -149,6 +152,8 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
     quiet = noise_mask(prep)
     ms = quiet if mask_s is None else (mask_s & quiet)
     x = rate_res_dps[ms]
+    if detrend:
+        x = x - project(slow_templates(prep)[ms], x)
     x = np.nan_to_num(x - np.nanmean(x))
     fs = 1.0 / prep.sample_interval_s
     if len(x) > 100:
@@ -165,6 +170,45 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
                 out["_sd_floor"][b] = (float(np.sqrt(np.mean(1.0 / (2.0 * edf)))), 0.0)
         out["_allan"] = (taus, adev)
     return out
+
+
+def slow_templates(prep: Prepared) -> np.ndarray:
+    """Deterministic slow signatures a temperature profile leaves in a residual, per sample.
+
+    An offset, the case temperature and its square (a temperature law the model lacks) and the
+    temperature rate (a gradient term), each scaled to unit range.
+
+    Parameters
+    ----------
+    prep : Prepared
+
+    Returns
+    -------
+    ndarray, shape (n_samples, 4)
+    """
+    T = np.asarray(prep.case_C, dtype=float)
+    u = (T - T.mean()) / max(float(np.ptp(T)), 1e-9)
+    r = prep.dTdt_K_per_min / max(float(np.max(np.abs(prep.dTdt_K_per_min))), 1e-9)
+    return np.column_stack([np.ones_like(u), u, u * u, r])
+
+
+def project(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Least-squares fit of ``x`` on the columns of ``A`` (NaN samples skipped, NaN where ``x`` is).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, k)
+    x : ndarray, shape (n,)
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    ok = np.isfinite(x)
+    if ok.sum() <= A.shape[1]:
+        return np.zeros_like(x)
+    coef = np.linalg.lstsq(A[ok], x[ok], rcond=None)[0]
+    return np.where(ok, A @ coef, np.nan)
 
 
 def window_log_ms_sd(z: np.ndarray, n: int) -> tuple[float, float]:

@@ -268,8 +268,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         rr = _rate_residual(prep, pred_k, nr["rate_V"])
         null_Z.append(fitter.residual(pred_k, scoring=True, Y=Yn))
         null_ms.append(_metrics(prep, fitter, pred_k, ho_b, Y=Yn))
-        null_ho_allan.append(loc.residual_stats(prep, Zn, rr, ho_b, ho_s).get("_allan", (None, np.array([])))[1])
-        null_tr_allan.append(loc.residual_stats(prep, Zn, rr, ~ho_b, ~ho_s).get("_allan", (None, np.array([])))[1])
+        null_ho_allan.append(loc.residual_stats(prep, Zn, rr, ho_b, ho_s, detrend=True).get("_allan", (None, np.array([])))[1])
+        null_tr_allan.append(loc.residual_stats(prep, Zn, rr, ~ho_b, ~ho_s, detrend=True).get("_allan", (None, np.array([])))[1])
     noise_params = _null_noise_model(null_Z) if null_Z else None
     # 3. attribution (deterministic effects), scored with the null's noise model
     scorer = Scorer(fitter, cal, noise_params)
@@ -295,8 +295,12 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     final_pred_tr = att["final"]["fit"]._ctx["pred"] if att["final"] else pred_cal
     rr_final = _rate_residual(prep, np.where(np.isfinite(final_pred_ho), final_pred_ho, final_pred_tr),
                               prep.obs["rate_V"])
-    meas_ho_allan = loc.residual_stats(prep, Z_meas, rr_final, ho_b, ho_s).get("_allan", (np.array([]), np.array([])))
-    meas_tr_allan = loc.residual_stats(prep, Z_meas, rr_final, ~ho_b, ~ho_s).get("_allan", (np.array([]), np.array([])))
+    # the flicker band of what the final model leaves, without the slow deterministic signatures a
+    # temperature profile can leave (else an unmodelled gradient term reads as extra flicker)
+    meas_ho_allan = loc.residual_stats(prep, Z_meas, rr_final, ho_b, ho_s, detrend=True).get(
+        "_allan", (np.array([]), np.array([])))
+    meas_tr_allan = loc.residual_stats(prep, Z_meas, rr_final, ~ho_b, ~ho_s, detrend=True).get(
+        "_allan", (np.array([]), np.array([])))
     noise_accepted = []
     q = quantization_candidate(prep, scn.device.values["noise"]["quantization_lsb_V"])
     ranked.append({"effect": "quantization", "params": {"lsb_V": q["lsb_V"]} if q else {"lsb_V": 0.0},

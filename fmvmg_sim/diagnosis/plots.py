@@ -76,7 +76,7 @@ def plot_all(rep: dict, out: Path) -> list[str]:
             ax.loglog(a[0], a[1] * 3600, color="0.6", lw=0.7, label="nominal re-simulated (null)" if k == 0 else None)
     t2, a2 = d["meas_ho_allan"]
     if len(a2):
-        ax.loglog(t2, a2 * 3600, label="held-out, corrected model")
+        ax.loglog(t2, a2 * 3600, label="held-out, corrected model (slow trends removed)")
     ax.set_xlabel("tau (s)")
     ax.set_ylabel("Allan deviation of the residual (deg/h)")
     ax.legend(fontsize=8)
