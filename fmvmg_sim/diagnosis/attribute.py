@@ -178,8 +178,9 @@ class Scorer:
         Returns
         -------
         dict
-            ``gain``, ``ci``, ``folds`` (per fold: gain, interval, total, ``info_if_true``, ``testable``),
-            ``folds_passed`` (of the testable folds), ``folds_testable``, ``by_channel``.
+            ``gain``, ``ci``, ``folds`` (per fold: gain, interval, total, ``info_if_true``, ``testable``,
+            ``consistent``, ``passed``),
+            ``folds_passed``, ``folds_testable``, ``by_channel``.
         """
         allv, folds, by_ch = [], [], []
         for k, fd in enumerate(self.folds):

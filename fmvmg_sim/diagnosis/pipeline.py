@@ -403,7 +403,8 @@ def _row(name: str, ev: dict, before: dict, after: dict, primary: str, cal_theta
             "gap_before": float(np.sqrt(before[primary])), "gap_after": float(np.sqrt(after.get(primary, 0.0))),
             "shrink": sh.get(primary), "metric": primary, "accepted": ev["accepted"],
             "heldout_gain": ev["gain"]["gain"], "heldout_gain_ci": ev["gain"]["ci"],
-            "folds_passed": ev["gain"]["folds_passed"], "delta_bic": ev["delta_bic"], "in_bounds": ev["in_bounds"],
+            "folds_passed": ev["gain"]["folds_passed"], "folds_testable": ev["gain"].get("folds_testable"),
+            "delta_bic": ev["delta_bic"], "in_bounds": ev["in_bounds"],
             "param_significant": ev["param_significant"],
             # how far the nominal knobs move from their calibration when the effect is fitted beside them
             "nominal_shift": {k: float(ev["fit"].theta[k] - v) for k, v in cal_theta.items() if k in ev["fit"].theta},
