@@ -101,7 +101,7 @@ def noise_mask(prep: Prepared) -> np.ndarray:
 
 
 def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mask_b: np.ndarray | None = None,
-                   mask_s: np.ndarray | None = None, detrend: bool = False) -> dict:
+                   mask_s: np.ndarray | None = None) -> dict:
     """The localisation statistics of one residual (measured or null).
 
     Parameters
@@ -113,9 +113,6 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
         Full-rate rate residual (deg/s), NaN where missing.
     mask_b, mask_s : ndarray of bool, optional
         Restrict to these blocks / samples.
-    detrend : bool, optional
-        Remove the rate residual's least-squares fit on :func:`slow_templates` before its Allan deviation
-        (a stochastic band test then ignores what is left of a deterministic temperature signature).
 
     Returns
     -------
@@ -149,17 +146,9 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
                     d.append(np.nanmean(Zb[h, i]) - np.nanmean(Zb[k, i]))
             if d:
                 out["regimes"][f"heating_minus_cooling_{c}"] = float(np.mean(np.square(d)))
-    quiet = noise_mask(prep)
-    ms = quiet if mask_s is None else (mask_s & quiet)
-    x = rate_res_dps[ms]
-    if detrend:
-        x = x - project(slow_templates(prep)[ms], x)
-    x = np.nan_to_num(x - np.nanmean(x))
     fs = 1.0 / prep.sample_interval_s
-    if len(x) > 100:
-        ad = allan_deviation(x, fs)
-        taus, adev = np.asarray(ad.taus_s), np.asarray(ad.adev)
-        span = len(x) / fs
+    taus, adev, span = residual_allan(prep, rate_res_dps, mask_s)
+    if len(adev):
         for b, (lo, hi) in ALLAN_BANDS.items():
             m = (taus >= max(lo, 1.5 / fs)) & (taus <= min(hi, span / 10)) & np.isfinite(adev) & (adev > 0)
             if m.any():
@@ -170,6 +159,40 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
                 out["_sd_floor"][b] = (float(np.sqrt(np.mean(1.0 / (2.0 * edf)))), 0.0)
         out["_allan"] = (taus, adev)
     return out
+
+
+def residual_allan(prep: Prepared, rate_res_dps: np.ndarray, mask_s: np.ndarray | None = None,
+                   templates: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """Allan deviation of the rate residual on the quiet samples (of ``mask_s``).
+
+    Parameters
+    ----------
+    prep : Prepared
+    rate_res_dps : ndarray
+        Full-rate rate residual (deg/s), NaN where missing.
+    mask_s : ndarray of bool, optional
+    templates : ndarray, shape (n_samples, k), optional
+        Columns whose least-squares fit is removed first (:func:`slow_templates`: a stochastic band test
+        then ignores what is left of a deterministic temperature signature).
+
+    Returns
+    -------
+    taus_s, adev_dps : ndarray
+        Empty with fewer than 100 samples.
+    span_s : float
+        Length of the data behind them.
+    """
+    quiet = noise_mask(prep)
+    ms = quiet if mask_s is None else (mask_s & quiet)
+    x = rate_res_dps[ms]
+    if templates is not None:
+        x = x - project(templates[ms], x)
+    x = np.nan_to_num(x - np.nanmean(x))
+    fs = 1.0 / prep.sample_interval_s
+    if len(x) <= 100:
+        return np.array([]), np.array([]), 0.0
+    ad = allan_deviation(x, fs)
+    return np.asarray(ad.taus_s), np.asarray(ad.adev), len(x) / fs
 
 
 def slow_templates(prep: Prepared) -> np.ndarray:

@@ -254,6 +254,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     Z_meas = fitter.residual(pred_cal)
     rr_meas = _rate_residual(prep, pred_cal, prep.obs["rate_V"])
     st_meas = loc.residual_stats(prep, Z_meas, rr_meas)
+    # the flicker band is read without the slow deterministic signatures a temperature profile can leave
+    # (else an unmodelled gradient term reads as extra flicker), in the record and in the null alike
+    slow = loc.slow_templates(prep)
     st_null, null_ms, null_ho_allan, null_tr_allan, null_Z = [], [], [], [], []
     for th, nr in zip(thetas, nulls):
         Yn = np.column_stack([prep.block_mean(nr[c]) for c in CHANNELS])
@@ -264,12 +267,11 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         # noise alone (against the replicate's own device): the scoring noise model, the metrics' noise
         # level and the flicker band
         pred_k = fitter.table(th).evaluate(die_b, fitter.rate_b)
-        Zn = fitter.residual(pred_k, Y=Yn)
         rr = _rate_residual(prep, pred_k, nr["rate_V"])
         null_Z.append(fitter.residual(pred_k, scoring=True, Y=Yn))
         null_ms.append(_metrics(prep, fitter, pred_k, ho_b, Y=Yn))
-        null_ho_allan.append(loc.residual_stats(prep, Zn, rr, ho_b, ho_s, detrend=True).get("_allan", (None, np.array([])))[1])
-        null_tr_allan.append(loc.residual_stats(prep, Zn, rr, ~ho_b, ~ho_s, detrend=True).get("_allan", (None, np.array([])))[1])
+        null_ho_allan.append(loc.residual_allan(prep, rr, ho_s, slow)[1])
+        null_tr_allan.append(loc.residual_allan(prep, rr, ~ho_s, slow)[1])
     noise_params = _null_noise_model(null_Z) if null_Z else None
     # 3. attribution (deterministic effects), scored with the null's noise model
     scorer = Scorer(fitter, cal, noise_params)
@@ -295,12 +297,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     final_pred_tr = att["final"]["fit"]._ctx["pred"] if att["final"] else pred_cal
     rr_final = _rate_residual(prep, np.where(np.isfinite(final_pred_ho), final_pred_ho, final_pred_tr),
                               prep.obs["rate_V"])
-    # the flicker band of what the final model leaves, without the slow deterministic signatures a
-    # temperature profile can leave (else an unmodelled gradient term reads as extra flicker)
-    meas_ho_allan = loc.residual_stats(prep, Z_meas, rr_final, ho_b, ho_s, detrend=True).get(
-        "_allan", (np.array([]), np.array([])))
-    meas_tr_allan = loc.residual_stats(prep, Z_meas, rr_final, ~ho_b, ~ho_s, detrend=True).get(
-        "_allan", (np.array([]), np.array([])))
+    # the flicker band of what the final model leaves
+    meas_ho_allan = loc.residual_allan(prep, rr_final, ho_s, slow)[:2]
+    meas_tr_allan = loc.residual_allan(prep, rr_final, ~ho_s, slow)[:2]
     noise_accepted = []
     q = quantization_candidate(prep, scn.device.values["noise"]["quantization_lsb_V"])
     ranked.append({"effect": "quantization", "params": {"lsb_V": q["lsb_V"]} if q else {"lsb_V": 0.0},
