@@ -46,3 +46,70 @@ def test_fold_rule_two_folds_or_the_only_testable_one():
     assert sc.folds_ok(g(fold(True, True), fold(False, False), fold(False, False)))
     assert not sc.folds_ok(g(fold(True, True, consistent=False), fold(False, False), fold(False, False)))
     assert not sc.folds_ok(g(fold(False, True), fold(False, False), fold(False, False)))  # nothing can test it
+
+
+def _fake_attribution(monkeypatch, pair_gain_of_lookalike):
+    """Forward selection on fake evaluations: A (accepted) and its look-alike B; C a second effect beside A."""
+    import contextlib
+
+    import numpy as np
+
+    import fmvmg_sim.diagnosis.attribute as A
+
+    names = A.DETERMINISTIC
+    a, b, c = "q_factor_drift", "reference_drift", "thermal_hysteresis"
+
+    class Fit:
+        effects = {}
+        _ctx = {"pred": np.zeros((4, 5))}
+
+    def ev(names_, gain, lo, accepted):
+        return {"names": list(names_), "fit": Fit(), "preds": {"tag": "+".join(sorted(names_))}, "in_bounds": True,
+                "gain": {"gain": gain, "ci": [lo, gain + 2.0]}, "accepted": accepted, "delta_bic": -50.0}
+
+    def fake_evaluate(scorer, names_, base, base_pred_train, fixed=None, k_base=0, new=None):
+        key = frozenset(names_)
+        table = {frozenset({a}): (10.0, 6.0, True), frozenset({b}): (9.5, 5.0, False),
+                 frozenset({c}): (1.0, -1.0, False),
+                 frozenset({a, c}): (3.0, 1.0, True),                        # C beside A: accepted second
+                 frozenset({b, c}): (pair_gain_of_lookalike, 9.0, False)}    # B with C, against the nominal model
+        return ev(names_, *table.get(key, (-1.0, -2.0, False)))
+
+    class FakeModel:
+        def __init__(self, *args):
+            pass
+
+        def fixed_nonlinear(self, eff):
+            return {}
+
+    class Scorer:
+        nominal = {"tag": "nominal"}
+        nominal_train_pred = np.zeros((4, 5))
+        cal = None
+
+        class f:
+            @staticmethod
+            def extra_score_floor(floor):
+                return contextlib.nullcontext()
+
+        @staticmethod
+        def gain(cand, base):   # the chosen pair A+C over the nominal model
+            assert cand["tag"] == "+".join(sorted((a, c))) and base["tag"] == "nominal"
+            return {"gain": 13.0, "ci": [11.0, 15.0]}
+
+    monkeypatch.setattr(A, "evaluate", fake_evaluate)
+    monkeypatch.setattr(A, "EffectModel", FakeModel)
+    assert a in names and b in names and c in names
+    return A.attribute(Scorer(), max_effects=2), a, b, c
+
+
+def test_forward_selected_pair_reports_the_first_effects_lookalike(monkeypatch):
+    att, a, b, c = _fake_attribution(monkeypatch, pair_gain_of_lookalike=12.5)
+    assert att["selected"] == [a, c]
+    assert att["pair_alternatives"] == {a: [b]}    # B beside C explains the record as well as A beside C
+
+
+def test_lookalike_that_fails_beside_the_second_effect_is_not_reported(monkeypatch):
+    att, a, b, c = _fake_attribution(monkeypatch, pair_gain_of_lookalike=8.0)
+    assert att["selected"] == [a, c]
+    assert att["pair_alternatives"] == {}

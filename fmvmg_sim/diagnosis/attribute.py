@@ -344,7 +344,7 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
     dict
         ``single``: {effect: evaluation}; ``selected``: list of effect names; ``final``: evaluation of the
         selected set (or None); ``pair_scan``: {effect: evaluation with the first};
-        ``pair_alternatives``: {member of a pair (fitted from scratch, or a forward-selected second effect):
+        ``pair_alternatives``: {member of a pair (fitted from scratch, or forward-selected, first or second):
         look-alikes that could replace it}.
     """
     base = scorer.nominal
@@ -380,6 +380,16 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                 # look-alike second effects: others that explain the same remaining gap as well
                 if (alts := ambiguity(pair_scan, second)):
                     pair_alternatives[second] = alts
+                # look-alikes of the first effect: one that explains the record as well beside the same
+                # second effect (the pair's held-out gain over the nominal model reaches the chosen pair's
+                # interval) could replace it
+                lo_pair = scorer.gain(final["preds"], base)["ci"][0]
+                for alt in ambiguity(single, best):
+                    if alt == second or (alt in NONLINEAR and second in NONLINEAR):
+                        continue
+                    ev = evaluate(scorer, sorted((alt, second)), base, scorer.nominal_train_pred)
+                    if ev["fit"] is not None and ev["in_bounds"] and ev["gain"]["gain"] >= lo_pair:
+                        pair_alternatives.setdefault(best, []).append(alt)
     elif max_effects > 1:
         # no single effect passes, but a pair may: each alone mis-fits the other's signature (pinned at a
         # bound, or extrapolating badly); start from the strongest candidates and fit pairs from scratch
