@@ -244,7 +244,8 @@ class EffectModel:
             nl[n] = float(np.exp(lg))
             return self.f.solve(self._lin(nl), rows).cost
         if hi > lo:
-            r = minimize_scalar(obj, bounds=(lo, hi), method="bounded", options={"xatol": NL_XATOL, "maxiter": NL_MAXITER})
+            r = minimize_scalar(obj, bounds=(lo, hi), method="bounded",
+                                options={"xatol": NL_XATOL, "maxiter": NL_MAXITER})
             best = float(np.exp(r.x)) if r.fun <= costs[k] else float(grid[k])
         else:
             best = float(grid[k])
