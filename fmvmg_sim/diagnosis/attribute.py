@@ -383,10 +383,10 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                 # look-alikes of the first effect: one that explains the record as well beside the same
                 # second effect (the pair's held-out gain over the nominal model reaches the chosen pair's
                 # interval) could replace it
-                lo_pair = scorer.gain(final["preds"], base)["ci"][0]
-                for alt in ambiguity(single, best):
-                    if alt == second or (alt in NONLINEAR and second in NONLINEAR):
-                        continue
+                first_alts = [a for a in ambiguity(single, best)
+                              if a != second and not (a in NONLINEAR and second in NONLINEAR)]
+                lo_pair = scorer.gain(final["preds"], base)["ci"][0] if first_alts else None
+                for alt in first_alts:
                     ev = evaluate(scorer, sorted((alt, second)), base, scorer.nominal_train_pred)
                     if ev["fit"] is not None and ev["in_bounds"] and ev["gain"]["gain"] >= lo_pair:
                         pair_alternatives.setdefault(best, []).append(alt)

@@ -382,7 +382,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         "wall_time_s": time.perf_counter() - wall0,
     }
     report["_debug"] = {"single": {n: {"gain": ev["gain"].get("by_channel"), "dbic": ev["delta_bic"],
-                                       "folds": ev["gain"].get("folds"), "ci": ev["gain"]["ci"], "acc": ev["accepted"]}
+                                       "folds": ev["gain"].get("folds"), "ci": ev["gain"]["ci"],
+                                       "acc": ev["accepted"]}
                                    for n, ev in att["single"].items() if ev["fit"] is not None},
                         "pairs": {n: {"gain": ev["gain"].get("by_channel"), "ci": ev["gain"]["ci"],
                                       "dbic": ev["delta_bic"], "acc": ev["accepted"],
