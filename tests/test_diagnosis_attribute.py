@@ -48,6 +48,30 @@ def test_fold_rule_two_folds_or_the_only_testable_one():
     assert not sc.folds_ok(g(fold(False, True), fold(False, False), fold(False, False)))  # nothing can test it
 
 
+def test_fold_rule_testable_folds_together():
+    """A near-limit effect: two folds can test it, one passes; together they carry it (or contradict it)."""
+    from fmvmg_sim.diagnosis.attribute import FOLDS_COMBINED_Z, Scorer
+
+    sc = Scorer.__new__(Scorer)
+    sc.folds_needed = 2
+
+    def fold(total, info, passed=False, consistent=True):
+        return {"testable": info >= 10.0, "passed": passed, "consistent": consistent, "total": total,
+                "info_if_true": info}
+
+    def g(*folds):
+        return {"folds": list(folds), "folds_passed": sum(f["passed"] for f in folds)}
+    # 9 + 25 nats where 11 + 16 were expected: 34 >= 2 sqrt(2 * 27) = 14.7
+    assert FOLDS_COMBINED_Z * (2 * 27.0) ** 0.5 < 34.0
+    assert sc.folds_ok(g(fold(9.2, 11.0), fold(-3.0, 4.0), fold(25.3, 16.0, passed=True)))
+    # one testable fold loses: they contradict each other
+    assert not sc.folds_ok(g(fold(-2.0, 11.0), fold(1.0, 4.0), fold(40.0, 30.0, passed=True)))
+    # a fold gaining far more than the candidate could: it leans on another misfit
+    assert not sc.folds_ok(g(fold(5.0, 11.0), fold(60.0, 16.0, passed=True, consistent=False)))
+    # both gain, but the sum is within the scatter of a false candidate's
+    assert not sc.folds_ok(g(fold(3.5, 40.0), fold(4.0, 40.0)))
+
+
 def _fake_attribution(monkeypatch, pair_gain_of_lookalike):
     """Forward selection on fake evaluations: A (accepted) and its look-alike B; C a second effect beside A."""
     import contextlib

@@ -8,7 +8,9 @@ accepted when
 * the pooled held-out gain per block has a block-bootstrap 95 % interval above zero, and in at
   least 2 of the 3 folds the interval is above zero and the fold's summed gain is at least
   :data:`FOLD_MIN_NATS`; or, when only one fold can test the candidate, that fold passes with the gain
-  the candidate would earn were it true. A fold can test a candidate when the candidate, were it true,
+  the candidate would earn were it true; or, when several folds can test it but fewer than 2 pass,
+  all of them gain as it would were it true and their summed gain is :data:`FOLDS_COMBINED_Z` standard
+  deviations above zero. A fold can test a candidate when the candidate, were it true,
   would gain at least :data:`FOLD_INFO_NATS` there (its held-out blocks carry its signature: a ramp-rate
   term cannot be tested on a hold, nor a weak second effect on blocks where the first one's model error
   hides it);
@@ -49,6 +51,9 @@ FOLD_INFO_NATS = 10.0
 #: Relative model accuracy allowed when checking a fold's gain against the gain expected were the candidate
 #: true (beside the noise scatter ``3 sqrt(2 I)``); see :meth:`Scorer.folds_ok`.
 FOLD_CONSISTENCY_REL = 0.25
+#: The testable folds' summed gain, in standard deviations ``sqrt(2 sum I)`` of its scatter, that passes a
+#: candidate that too few folds pass one by one (:meth:`Scorer.folds_ok`).
+FOLDS_COMBINED_Z = 2.0
 #: Candidates (positive held-out gain, none accepted) from which pairs are fitted from scratch.
 PAIR_STARTS = 2
 #: Relative accuracy of an accepted effect's model (a floor on the scoring sigma of a second effect).
@@ -213,12 +218,15 @@ class Scorer:
                 "by_channel": {c: float(v) for c, v in zip(CHANNELS, ch) if self.f.present[CHANNELS.index(c)]}}
 
     def folds_ok(self, g: dict) -> bool:
-        """Enough folds passed: :data:`FOLDS_NEEDED`, or the one fold that can test the candidate.
+        """Enough folds passed: :data:`FOLDS_NEEDED`, the one fold that can test the candidate, or the
+        folds that can test it together.
 
         Where a single fold can test it (a ramp-rate term beside a record of holds, a weak second effect
         that the first one's model error hides elsewhere), that fold must pass and its gain must also be
         what the candidate would earn were it true: a gain far above it comes from a larger misfit (slow
-        noise, another effect) the candidate merely leans against.
+        noise, another effect) the candidate merely leans against. Where several folds can test it but
+        fewer pass, all of them must gain, each as the candidate would were it true, and their summed
+        gain must reach :data:`FOLDS_COMBINED_Z` standard deviations of its scatter.
 
         Parameters
         ----------
@@ -232,7 +240,18 @@ class Scorer:
         if g["folds_passed"] >= self.folds_needed:
             return True
         testable = [f for f in g["folds"] if f.get("testable")]
-        return bool(len(testable) == 1 and testable[0]["passed"] and testable[0]["consistent"])
+        if len(testable) == 1:
+            return bool(testable[0]["passed"] and testable[0]["consistent"])
+        # several folds can test it, but too little of it is in each to pass them one by one (a near-limit
+        # effect, each fold's held-out segment carrying 10-30 nats of it): they must agree, each gaining and each
+        # consistent with the gain expected were the candidate true, and their summed gain must stand
+        # FOLDS_COMBINED_Z scatters above zero (were the candidate false, the sum would centre on
+        # -sum(I), so a false one passes with probability below Phi(-FOLDS_COMBINED_Z))
+        if len(testable) < 2 or not all(f["consistent"] and f.get("total", 0.0) > 0 for f in testable):
+            return False
+        total = sum(f["total"] for f in testable)
+        info = sum(f["info_if_true"] for f in testable)
+        return bool(total >= FOLDS_COMBINED_Z * np.sqrt(2.0 * info))
 
     def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int) -> float:
         """BIC(candidate) - BIC(base) on the training window (AR(1) likelihood).
