@@ -137,3 +137,60 @@ def test_lookalike_that_fails_beside_the_second_effect_is_not_reported(monkeypat
     att, a, b, c = _fake_attribution(monkeypatch, pair_gain_of_lookalike=8.0)
     assert att["selected"] == [a, c]
     assert att["pair_alternatives"] == {}
+
+
+def test_second_effect_rejudged_with_the_records_rate_noise(monkeypatch):
+    """Extra flicker found: the second effect is scored again, beside the first alone, with the new noise model."""
+    import contextlib
+
+    import numpy as np
+
+    import fmvmg_sim.diagnosis.attribute as A
+
+    a, c = "q_factor_drift", "temperature_rate"
+    seen = []
+
+    class Fit:
+        effects = {}
+        _ctx = {"pred": np.zeros((4, 5))}
+
+    def fake_evaluate(scorer, names_, base, base_pred_train, fixed=None, k_base=0, new=None):
+        rho, K, s = scorer.noise_params[0]
+        seen.append((list(names_), list(new), base["tag"]))
+        # a term that follows the wander passes only while the noise model holds little slow noise
+        return {"names": list(names_), "fit": Fit(), "preds": {"tag": "pair"}, "in_bounds": True,
+                "gain": {"gain": 1.0, "ci": [0.5, 1.5]}, "accepted": K < 0.5, "delta_bic": -20.0}
+
+    class FakeModel:
+        def __init__(self, *args):
+            pass
+
+        def fixed_nonlinear(self, eff):
+            return {}
+
+    class Scorer:
+        noise_params = [(0.9, 0.1, 1.0)] * 5
+        nominal_train_pred = np.zeros((4, 5))
+        cal = None
+
+        class f:
+            @staticmethod
+            def extra_score_floor(floor):
+                return contextlib.nullcontext()
+
+    monkeypatch.setattr(A, "evaluate", fake_evaluate)
+    monkeypatch.setattr(A, "EffectModel", FakeModel)
+    first = {"fit": Fit(), "preds": {"tag": "first"}}
+    att = {"single": {a: first}, "selected": [a, c], "final": {"tag": "pair"}, "pair_scan": {c: {}},
+           "pair_alternatives": {a: ["reference_drift"]}}
+    sc = Scorer()
+    out = A.rejudge_second(sc, att, 0, (0.99, 0.8, 1.0))
+    assert seen == [([a, c], [c], "first")]                       # the pair, scored against the first alone
+    assert out["selected"] == [a] and out["final"] is first and out["pair_alternatives"] == {}
+    assert out["rejudged"]["effect"] == c and not out["rejudged"]["accepted"]
+    assert sc.noise_params[0] == (0.9, 0.1, 1.0) and att["selected"] == [a, c]   # inputs untouched
+    kept = A.rejudge_second(sc, att, 0, (0.99, 0.1, 1.0))
+    assert kept["selected"] == [a, c] and kept["rejudged"]["accepted"]
+    # nothing to judge: one effect, or a pair fitted from scratch (no forward-selected second)
+    assert A.rejudge_second(sc, dict(att, selected=[a]), 0, (0.99, 0.8, 1.0))["rejudged"] is None
+    assert A.rejudge_second(sc, dict(att, pair_scan={}), 0, (0.99, 0.8, 1.0))["selected"] == [a, c]

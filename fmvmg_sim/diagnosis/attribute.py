@@ -26,6 +26,7 @@ judged separately: the rate output's lattice, and the Allan flicker band against
 
 from __future__ import annotations
 
+import copy
 import sys
 
 import numpy as np
@@ -453,6 +454,54 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                         pair_alternatives[swapped].append(alt)
     return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan,
             "pair_alternatives": pair_alternatives}
+
+
+def rejudge_second(scorer: Scorer, att: dict, channel: int, params: tuple) -> dict:
+    """Re-score a forward-selected second effect with one channel's noise model replaced.
+
+    The scoring noise model comes from the null, re-simulated with the device's nominal noise. When the
+    record carries more slow noise than that in a channel (extra flicker, found in the Allan band of what
+    the two-effect model leaves), a smooth candidate such as the temperature-rate term is credited for
+    following the wander. The second effect is then judged again, against the first one alone, with that
+    channel's noise model fitted to what the two-effect model leaves on the training window (so a true
+    second effect's own signature is not counted as noise); if it no longer passes it is dropped.
+
+    Parameters
+    ----------
+    scorer : Scorer
+    att : dict
+        From :func:`attribute`.
+    channel : int
+        Index into :data:`~.forward.CHANNELS`.
+    params : tuple
+        ``(rho, K, s)`` slow-state noise model of that channel (:func:`~.likelihood.slow_state_fit`).
+
+    Returns
+    -------
+    dict
+        ``att`` with ``selected``, ``final`` and ``pair_alternatives`` updated, and ``rejudged``:
+        ``{"effect", "accepted", "gain", "ci"}`` of the re-scored second effect (None when there was none).
+    """
+    att = dict(att, rejudged=None)
+    sel = att["selected"]
+    if len(sel) != 2 or sel[1] not in att["pair_scan"] or scorer.noise_params is None:
+        return att
+    best, second = sel
+    sc2 = copy.copy(scorer)
+    sc2.noise_params = list(scorer.noise_params)
+    sc2.noise_params[channel] = params
+    first = att["single"][best]
+    fixed = EffectModel(scorer.f, scorer.cal, [best]).fixed_nonlinear(first["fit"].effects)
+    sig1 = np.abs(first["fit"]._ctx["pred"] - scorer.nominal_train_pred)
+    with scorer.f.extra_score_floor(SECOND_EFFECT_REL_FLOOR * sig1):
+        ev = evaluate(sc2, [best, second], first["preds"], first["fit"]._ctx["pred"],
+                      fixed if second in NONLINEAR else {}, k_base=len(MODELS[best]), new=[second])
+    att["rejudged"] = {"effect": second, "accepted": bool(ev["accepted"]), "gain": ev["gain"]["gain"],
+                       "ci": ev["gain"]["ci"]}
+    if not ev["accepted"]:
+        att["selected"], att["final"] = [best], first
+        att["pair_alternatives"] = {}  # they were look-alikes beside the dropped effect
+    return att
 
 
 def _beats(scorer: Scorer, ev: dict, other: dict) -> bool:

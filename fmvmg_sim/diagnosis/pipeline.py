@@ -18,11 +18,12 @@ from ..errors import InputError
 from ..record import Record, read_record
 from ..scenario import Scenario, load_scenario
 from . import localize as loc
-from .attribute import Scorer, ambiguity, attribute, separating_experiment
+from .attribute import Scorer, ambiguity, attribute, rejudge_second, separating_experiment
 from .calibrate import calibrate
 from .data import Prepared, prepare
 from .fitting import Fitter
 from .forward import CHANNELS, IRATE
+from .likelihood import slow_state_fit
 from .noise_effects import (FLICKER_Z_HELDOUT, FLICKER_Z_TRAIN, band_excess, flicker_level,
                             quantization_candidate)
 
@@ -35,6 +36,8 @@ N_NULL = 6
 DIE_FLOOR_K = 0.002
 #: Floor proportional to each channel's swing over the record (relative model accuracy).
 REL_FLOOR = 0.0
+#: Floor on the white part of a channel's scoring noise model (in scoring sigmas).
+NOISE_SD_FLOOR = 0.05
 #: Expected white rate noise of the nominal device (deg/s per sqrt(Hz)) per V/sqrt(Hz) of sense input noise:
 #: ARW 1.66 deg/sqrt(h) = 0.0277 deg/s/sqrt(Hz) at 1.07 uV/sqrt(Hz) (device file calibration).
 _ARW_PER_VNOISE = 0.0277 / 1.07e-6
@@ -132,12 +135,11 @@ def _shrink(before: dict, after: dict) -> dict:
 
 
 def _null_noise_model(null_Z: list) -> list:
-    """Slow-state noise model ``(rho, K, s)`` per channel, pooled over the null replicates (s floored at 0.05).
+    """Slow-state noise model ``(rho, K, s)`` per channel, pooled over the null replicates (s floored).
 
     See :mod:`.likelihood`: an AR(1) alone cannot hold both the white block noise and the slow
     flicker wander of the rate output, and then credits any candidate that follows the wander.
     """
-    from .likelihood import slow_state_fit
     out = []
     for c in range(null_Z[0].shape[1]):
         series = [Z[:, c] for Z in null_Z if np.isfinite(Z[:, c]).sum() > 3]
@@ -145,7 +147,7 @@ def _null_noise_model(null_Z: list) -> list:
             out.append(None)
             continue
         rho, K, s = slow_state_fit(series)
-        out.append((rho, K, max(s, 0.05)))
+        out.append((rho, K, max(s, NOISE_SD_FLOOR)))
     return out
 
 
@@ -314,6 +316,16 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     ex_tr, z_tr = band_excess(meas_tr_allan[0], meas_tr_allan[1], null_tr_allan,
                               span_s=(~ho_s & quiet).sum() * dt)
     flick_ok = bool(z_ho > FLICKER_Z_HELDOUT and z_tr > FLICKER_Z_TRAIN and not q)
+    if flick_ok and len(att["selected"]) == 2:
+        # more slow noise in the rate output than the null's noise model holds: a smooth second effect (a
+        # temperature-rate term) may have been credited for following the wander; judge it again with the
+        # rate channel's noise model fitted to what the two-effect model leaves
+        z_rate = fitter.residual(att["final"]["fit"]._ctx["pred"], scoring=True)[scorer.train][:, IRATE]
+        rho, K, s_ = slow_state_fit([z_rate])
+        att = rejudge_second(scorer, att, IRATE, (rho, K, max(s_, NOISE_SD_FLOOR)))
+        for r in ranked:
+            if att["rejudged"] and r["effect"] == att["rejudged"]["effect"]:
+                r["rejudged_with_record_rate_noise"] = att["rejudged"]
     g_before = max(ex_ho, 0.0)
     g_after = abs(ex_ho - max(ex_tr, 0.0))
     ranked.append({"effect": "flicker_noise", "params": {"h_phase_rad2": 0.0, "h_output_dps2": flicker_level(ex_tr)},
@@ -389,7 +401,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                                       "dbic": ev["delta_bic"], "acc": ev["accepted"],
                                       "folds": ev["gain"].get("folds")}
                                   for n, ev in att["pair_scan"].items() if ev["fit"] is not None},
-                        "noise": noise_params}
+                        "noise": noise_params, "rejudged": att.get("rejudged")}
     report["_plot"] = dict(prep=prep, fitter=fitter, pred_cal=pred_cal, nominal_ho=nominal_ho,
                            final_ho=att["final"]["preds"]["heldout"] if att["final"] else None,
                            final_tr=final_pred_tr, st_meas=st_meas, st_null=st_null, meas_ho_allan=meas_ho_allan,
