@@ -23,6 +23,17 @@ def test_pinned_and_zero_bounds():
     assert not _in_bounds({"feedthrough": {"c_ft_fF": 1.0, "tc_per_K": 0.02}})     # outside
 
 
+def test_why_not_names_each_failed_criterion():
+    from fmvmg_sim.diagnosis.attribute import why_not
+
+    good = {"gain": {"ci": [0.5, 2.0]}, "delta_bic": -40.0, "in_bounds": True, "param_significant": True}
+    assert why_not(good, folds_ok=True) == []
+    assert why_not(good, folds_ok=False) == ["too few held-out folds pass"]
+    bad = {"gain": {"ci": [-0.1, 2.0]}, "delta_bic": -5.0, "in_bounds": False, "param_significant": False}
+    assert len(why_not(bad, folds_ok=True)) == 4
+    assert why_not(dict(good, delta_bic=-5.0), True) == ["dBIC not below -10"]
+
+
 def test_separating_experiment_is_symmetric():
     a = separating_experiment("reference_drift", "q_factor_drift")
     assert a == separating_experiment("q_factor_drift", "reference_drift")

@@ -20,6 +20,8 @@ def test_null_record_gives_none(tmp_path):
     assert rep["verdict"] == "none", [(r["effect"], r.get("heldout_gain_ci"), r.get("delta_bic"))
                                       for r in rep["ranked"][:3]]
     assert rep["accepted"] == []
+    # every candidate says which criterion it fails
+    assert all(r["why_not"] for r in rep["ranked"]), [(r["effect"], r.get("why_not")) for r in rep["ranked"]]
 
 
 def test_thermal_lag_attributed_with_gaps_and_nans(tmp_path, capsys):
@@ -40,7 +42,7 @@ def test_thermal_lag_attributed_with_gaps_and_nans(tmp_path, capsys):
     assert rep == json.loads((out / "report.json").read_text())
     assert rep["verdict"] in ("explained", "ambiguous") and rep["accepted"][0] == "thermal_lag"
     top = rep["ranked"][0]
-    assert top["effect"] == "thermal_lag" and top["accepted"]
+    assert top["effect"] == "thermal_lag" and top["accepted"] and "why_not" not in top
     assert abs(top["params"]["tau_s"] - 600.0) / 600.0 < 0.10          # stated tolerance: 10 %
     assert top["shrink"] > 0.5
     assert rep["record"]["issues"]["gaps"] and rep["record"]["issues"]["nan_samples"]["quadrature_V"] == 10

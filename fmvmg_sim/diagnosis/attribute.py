@@ -337,15 +337,46 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # outside the model's domain
         return {"names": list(names), "fit": None, "preds": None, "error": f"{type(exc).__name__}: {exc}",
                 "gain": {"gain": -np.inf, "ci": [-np.inf, -np.inf], "folds": [], "folds_passed": 0},
-                "delta_bic": np.inf, "in_bounds": False, "param_significant": False, "accepted": False}
+                "delta_bic": np.inf, "in_bounds": False, "param_significant": False, "accepted": False,
+                "why_not": ["the fit left the model's domain"]}
     g = scorer.gain(preds, base)
     k = sum(len(MODELS[n]) for n in names) - k_base
     dbic = scorer.delta_bic(mf._ctx["pred"], base_pred_train, k)
     inb = _in_bounds(mf.effects)
     sig = _significant_param(mf, list(new if new is not None else names))
-    acc = bool(g["ci"][0] > 0 and scorer.folds_ok(g) and dbic < DELTA_BIC_MAX and inb and sig)
-    return {"names": list(names), "fit": mf, "preds": preds, "gain": g, "delta_bic": float(dbic),
-            "in_bounds": inb, "param_significant": sig, "accepted": acc}
+    ev = {"names": list(names), "fit": mf, "preds": preds, "gain": g, "delta_bic": float(dbic),
+          "in_bounds": inb, "param_significant": sig}
+    ev["why_not"] = why_not(ev, scorer.folds_ok(g))
+    ev["accepted"] = not ev["why_not"]
+    return ev
+
+
+def why_not(ev: dict, folds_ok: bool) -> list[str]:
+    """The acceptance criteria an evaluated candidate fails (empty: accepted).
+
+    Parameters
+    ----------
+    ev : dict
+        From :func:`evaluate` (``gain``, ``delta_bic``, ``in_bounds``, ``param_significant``).
+    folds_ok : bool
+        :meth:`Scorer.folds_ok` of its gain.
+
+    Returns
+    -------
+    list of str
+    """
+    out = []
+    if not ev["gain"]["ci"][0] > 0:
+        out.append("held-out gain interval reaches zero")
+    if not folds_ok:
+        out.append("too few held-out folds pass")
+    if not ev["delta_bic"] < DELTA_BIC_MAX:
+        out.append(f"dBIC not below {DELTA_BIC_MAX:g}")
+    if not ev["in_bounds"]:
+        out.append("a parameter outside or pinned at its physical bound")
+    if not ev["param_significant"]:
+        out.append("no parameter 2 standard errors from zero")
+    return out
 
 
 def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_pairs: int = 12) -> dict:
@@ -434,6 +465,8 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                 if ev["accepted"]:
                     ev["accepted"] = (all(_significant_param(ev["fit"], [m]) for m in (a, n))
                                       and all(_beats(scorer, ev, single[m]) for m in (a, n)))
+                    if not ev["accepted"]:
+                        ev["why_not"] = ["one member adds nothing held-out to the other"]
         acc2 = [k for k in pair_scan if pair_scan[k]["accepted"]]
         if acc2:
             k = max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"])

@@ -290,7 +290,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         if ev["fit"] is None:
             ranked.append({"effect": name, "params": {}, "gap_before": float(np.sqrt(before[primary])),
                            "gap_after": None, "shrink": None, "metric": primary, "accepted": False,
-                           "heldout_gain": None, "error": ev.get("error")})
+                           "heldout_gain": None, "error": ev.get("error"), "why_not": ev.get("why_not")})
             continue
         after = _gaps(_metrics(prep, fitter, ev["preds"]["heldout"], ho_b), noise_ms)
         ranked.append(_row(name, ev, before, after, primary, cal.theta))
@@ -326,6 +326,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         for r in ranked:
             if att["rejudged"] and r["effect"] == att["rejudged"]["effect"]:
                 r["rejudged_with_record_rate_noise"] = att["rejudged"]
+                if not att["rejudged"]["accepted"]:
+                    r["why_not"] = r.get("why_not", []) + ["as a second effect, fails with the record's own rate "
+                                                           "noise (extra flicker found)"]
     g_before = max(ex_ho, 0.0)
     g_after = abs(ex_ho - max(ex_tr, 0.0))
     ranked.append({"effect": "flicker_noise", "params": {"h_phase_rad2": 0.0, "h_output_dps2": flicker_level(ex_tr)},
@@ -375,8 +378,22 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     order = {n: i for i, n in enumerate(accepted)}
     ranked.sort(key=lambda r: (0 if r["accepted"] else 1, order.get(r["effect"], 99),
                                -(r["heldout_gain"] if r["heldout_gain"] is not None else -1e300)))
+    lookalike_of = {o: a for a, others in amb.items() for o in others}
     for r in ranked:
         r["accepted"] = r["effect"] in accepted
+        if r["accepted"]:
+            r.pop("why_not", None)
+        elif r["effect"] == "flicker_noise" and flick_ok:
+            r["why_not"] = ["at most two effects are reported"]
+        elif r["effect"] == "flicker_noise":
+            r["why_not"] = ["the flicker band is within the null's" if not q else
+                            "not judged beside a coarser converter (its staircase changes the flicker band)"]
+        elif r["effect"] == "quantization":
+            r["why_not"] = ["the output's lattice is the nominal converter's"]
+        elif r["effect"] in lookalike_of:
+            r["why_not"] = [f"look-alike of {lookalike_of[r['effect']]}: explains the same gap (see the ambiguity)"]
+        elif not r.get("why_not"):
+            r["why_not"] = ["passes alone; another effect explains the gap better"]
     report = {
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
@@ -419,7 +436,7 @@ def _row(name: str, ev: dict, before: dict, after: dict, primary: str, cal_theta
             "heldout_gain": ev["gain"]["gain"], "heldout_gain_ci": ev["gain"]["ci"],
             "folds_passed": ev["gain"]["folds_passed"], "folds_testable": ev["gain"].get("folds_testable"),
             "delta_bic": ev["delta_bic"], "in_bounds": ev["in_bounds"],
-            "param_significant": ev["param_significant"],
+            "param_significant": ev["param_significant"], "why_not": list(ev.get("why_not") or []),
             # how far the nominal knobs move from their calibration when the effect is fitted beside them
             "nominal_shift": {k: float(ev["fit"].theta[k] - v) for k, v in cal_theta.items() if k in ev["fit"].theta},
             "shrink_by_metric": sh}

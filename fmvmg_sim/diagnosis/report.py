@@ -86,15 +86,16 @@ def markdown(rep: dict) -> str:
         for n, d in rep["localization"][g].items():
             L.append(f"| {g} | {n} | {d['z']:.2f} | {d['p_holm']:.2g} | {'**yes**' if d['significant'] else 'no'} |")
     L += ["", "## 3. Attribution (held-out, forward-chained)", "",
-          "| effect | accepted | params | held-out gain [CI] | folds passed / can test | dBIC | gap before | after | shrink |",
-          "|---|---|---|---|---|---|---|---|---|"]
+          "| effect | accepted | params | held-out gain [CI] | folds passed / can test | dBIC | gap before | after | shrink "
+          "| why not |",
+          "|---|---|---|---|---|---|---|---|---|---|"]
     for row in rep["ranked"]:
         ps = ", ".join(f"{k}={_fmt(v)}" for k, v in (row.get("params") or {}).items())
         ci = row.get("heldout_gain_ci")
         g = f"{_fmt(row.get('heldout_gain'))} [{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "-"
         L.append(f"| {row['effect']} | {'**yes**' if row['accepted'] else 'no'} | {ps} | {g} | "
                  f"{_fmt(row.get('folds_passed'))} / {_fmt(row.get('folds_testable'))} | {_fmt(row.get('delta_bic'), '.3g')} | {_fmt(row.get('gap_before'))} | "
-                 f"{_fmt(row.get('gap_after'))} | {_fmt(row.get('shrink'), '.3f')} |")
+                 f"{_fmt(row.get('gap_after'))} | {_fmt(row.get('shrink'), '.3f')} | {'; '.join(row.get('why_not') or [])} |")
     c = rep.get("combined")
     if c:
         L += ["", f"## 4. Gap before and after ({' + '.join(c['effects'])}), held-out data", "",
