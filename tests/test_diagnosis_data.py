@@ -60,3 +60,27 @@ def test_coarse_recorder_sets_a_floor_on_block_means():
     rec, _ = _quantised_record(noise_V=0.02)
     prep = prepare(rec, 0.01)
     assert prep.quantization_floor()[i] < 1e-6
+
+
+def test_rate_stuck_on_one_level_takes_the_quadrature_step():
+    """A converter step far above the rate signal: the rate never leaves 0, the quadrature shows the step."""
+    from fmvmg_sim.diagnosis.noise_effects import quantization_candidate
+
+    rng = np.random.default_rng(3)
+    n, lsb = 7200, 0.02
+    t = np.arange(1.0, n + 1.0)
+    quad_V = np.round((1.7 + 0.08 * np.sin(2 * np.pi * t / 6000.0) + 1e-4 * rng.standard_normal(n)) / lsb) * lsb
+    rate_V = np.round(1e-3 * rng.standard_normal(n) / lsb) * lsb               # every sample rounds to 0
+    cols = {"time_s": t, "temperature_C": np.full(n, 25.0), "rate_dps": rate_V / 0.01, "rate_V": rate_V,
+            "quadrature_V": quad_V, "rate_true_dps": np.zeros(n)}
+    prep = prepare(Record(cols, {}), 0.01)
+    L = prep.lattice()
+    assert abs(L[CHANNELS.index("quadrature_V")] - lsb) < 1e-9
+    assert L[CHANNELS.index("rate_V")] == L[CHANNELS.index("quadrature_V")]
+    assert abs(prep.quantization_floor()[CHANNELS.index("rate_V")] - lsb / np.sqrt(12)) < 1e-4
+    q = quantization_candidate(prep, nominal_lsb_V=1e-4)
+    assert q is not None and abs(q["lsb_V"] - lsb) < 1e-9 and q["on_lattice"] == 1.0
+    # a rate output that moves but has no lattice keeps none, whatever the quadrature shows
+    cols["rate_V"] = 1e-3 * rng.standard_normal(n)
+    cols["rate_dps"] = cols["rate_V"] / 0.01
+    assert prepare(Record(cols, {}), 0.01).lattice()[CHANNELS.index("rate_V")] == 0.0

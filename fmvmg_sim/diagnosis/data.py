@@ -41,6 +41,8 @@ FLOORS = {"rate_V": 2e-7, "quadrature_V": 2e-6, "drive_amplitude_V": 3e-7, "agc_
           "drive_frequency_Hz": 3e-5}
 #: A channel is quantised when this fraction of its samples sits on the lattice found.
 ON_LATTICE_MIN = 0.9
+#: Channels read through one converter (the output quantiser acts on both).
+CONVERTER_CHANNELS = ("rate_V", "quadrature_V")
 
 
 def lattice_lsb(x_V: np.ndarray) -> tuple[float, float]:
@@ -227,6 +229,15 @@ class Prepared:
             lsb, frac = self.lattice_of(c)
             if frac >= ON_LATTICE_MIN:
                 out[i] = lsb
+        # one converter reads rate and quadrature: a channel that never leaves one level has its signal
+        # and noise inside half a step (no lattice to read off it), and takes the step the other one shows
+        conv = [CHANNELS.index(c) for c in CONVERTER_CHANNELS if c in self.channels]
+        step = max((out[i] for i in conv), default=0.0)
+        for i in conv:
+            x = self.obs[CHANNELS[i]]
+            x = x[np.isfinite(x)]
+            if out[i] == 0.0 and step > 0 and len(x) and np.ptp(x) == 0.0:
+                out[i] = step
         return out
 
     def quantization_floor(self) -> np.ndarray:

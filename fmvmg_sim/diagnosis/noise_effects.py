@@ -3,7 +3,8 @@
 Neither changes the deterministic response, so neither is fitted by the block model:
 
 * ``quantization``: the raw output takes values on a lattice ``k * lsb``; the spacing is read from
-  the smallest non-zero steps of ``rate_V`` and checked (most samples on the lattice);
+  the smallest non-zero steps of ``rate_V`` and checked (most samples on the lattice); a rate output that
+  never leaves one level takes the step of the quadrature output, read through the same converter;
 * ``flicker_noise``: the Allan deviation of the rate residual in the flicker band (10-300 s) against
   the re-simulated null; the excess variance gives the 1/f level ``h = excess / (2 ln 2)``. The split
   between phase and output flicker is not identifiable from the rate output alone (reported as output).
@@ -37,7 +38,9 @@ def quantization_candidate(prep: Prepared, nominal_lsb_V: float) -> dict | None:
     """
     lsb = prep.lattice()[IRATE]
     if lsb > 1.5 * max(nominal_lsb_V, 1e-12):
-        return {"lsb_V": lsb, "on_lattice": prep.lattice_of("rate_V")[1]}
+        x = prep.obs["rate_V"]
+        x = x[np.isfinite(x)] / lsb
+        return {"lsb_V": lsb, "on_lattice": float(np.mean(np.abs(x - np.round(x)) < 0.02))}
     return None
 
 
