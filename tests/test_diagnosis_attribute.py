@@ -1,5 +1,9 @@
 """Attribution bookkeeping: ambiguity sets and the physical-bound rule (the fits are tested end to end)."""
 
+import contextlib
+
+import numpy as np
+
 from fmvmg_sim.diagnosis.attribute import _in_bounds, ambiguity, separating_experiment
 
 
@@ -47,7 +51,8 @@ def test_fold_rule_two_folds_or_the_only_testable_one():
     sc.folds_needed = 2
 
     def fold(testable, passed, consistent=True):
-        return {"testable": testable, "passed": passed, "consistent": consistent}
+        return {"testable": testable, "passed": passed, "consistent": consistent,
+                "total": 5.0 if passed else -1.0, "info_if_true": 12.0 if testable else 1.0}
 
     def g(*folds):
         return {"folds": list(folds), "folds_passed": sum(f["passed"] for f in folds)}
@@ -83,23 +88,43 @@ def test_fold_rule_testable_folds_together():
     assert not sc.folds_ok(g(fold(3.5, 40.0), fold(4.0, 40.0)))
 
 
+class _Fit:
+    """A fitted model as the attribution reads it (no effects of its own, a zero training prediction)."""
+    effects = {}
+    _ctx = {"pred": np.zeros((4, 5))}
+
+
+class _FakeModel:
+    """An effect model whose first effect has no nonlinear parameter to hold fixed."""
+
+    def __init__(self, *args):
+        pass
+
+    def fixed_nonlinear(self, eff):
+        return {}
+
+
+class _FakeScorer:
+    """The parts of a Scorer the forward selection touches, without a record behind them."""
+    nominal = {"tag": "nominal"}
+    nominal_train_pred = np.zeros((4, 5))
+    cal = None
+
+    class f:
+        @staticmethod
+        def extra_score_floor(floor):
+            return contextlib.nullcontext()
+
+
 def _fake_attribution(monkeypatch, pair_gain_of_lookalike):
     """Forward selection on fake evaluations: A (accepted) and its look-alike B; C a second effect beside A."""
-    import contextlib
-
-    import numpy as np
-
     import fmvmg_sim.diagnosis.attribute as A
 
     names = A.DETERMINISTIC
     a, b, c = "q_factor_drift", "reference_drift", "thermal_hysteresis"
 
-    class Fit:
-        effects = {}
-        _ctx = {"pred": np.zeros((4, 5))}
-
     def ev(names_, gain, lo, accepted):
-        return {"names": list(names_), "fit": Fit(), "preds": {"tag": "+".join(sorted(names_))}, "in_bounds": True,
+        return {"names": list(names_), "fit": _Fit(), "preds": {"tag": "+".join(sorted(names_))}, "in_bounds": True,
                 "gain": {"gain": gain, "ci": [lo, gain + 2.0]}, "accepted": accepted, "delta_bic": -50.0}
 
     def fake_evaluate(scorer, names_, base, base_pred_train, fixed=None, k_base=0, new=None):
@@ -110,30 +135,14 @@ def _fake_attribution(monkeypatch, pair_gain_of_lookalike):
                  frozenset({b, c}): (pair_gain_of_lookalike, 9.0, False)}    # B with C, against the nominal model
         return ev(names_, *table.get(key, (-1.0, -2.0, False)))
 
-    class FakeModel:
-        def __init__(self, *args):
-            pass
-
-        def fixed_nonlinear(self, eff):
-            return {}
-
-    class Scorer:
-        nominal = {"tag": "nominal"}
-        nominal_train_pred = np.zeros((4, 5))
-        cal = None
-
-        class f:
-            @staticmethod
-            def extra_score_floor(floor):
-                return contextlib.nullcontext()
-
+    class Scorer(_FakeScorer):
         @staticmethod
         def gain(cand, base):   # the chosen pair A+C over the nominal model
             assert cand["tag"] == "+".join(sorted((a, c))) and base["tag"] == "nominal"
             return {"gain": 13.0, "ci": [11.0, 15.0]}
 
     monkeypatch.setattr(A, "evaluate", fake_evaluate)
-    monkeypatch.setattr(A, "EffectModel", FakeModel)
+    monkeypatch.setattr(A, "EffectModel", _FakeModel)
     assert a in names and b in names and c in names
     return A.attribute(Scorer(), max_effects=2), a, b, c
 
@@ -152,46 +161,24 @@ def test_lookalike_that_fails_beside_the_second_effect_is_not_reported(monkeypat
 
 def test_second_effect_rejudged_with_the_records_rate_noise(monkeypatch):
     """Extra flicker found: the second effect is scored again, beside the first alone, with the new noise model."""
-    import contextlib
-
-    import numpy as np
-
     import fmvmg_sim.diagnosis.attribute as A
 
     a, c = "q_factor_drift", "temperature_rate"
     seen = []
 
-    class Fit:
-        effects = {}
-        _ctx = {"pred": np.zeros((4, 5))}
-
     def fake_evaluate(scorer, names_, base, base_pred_train, fixed=None, k_base=0, new=None):
         rho, K, s = scorer.noise_params[0]
         seen.append((list(names_), list(new), base["tag"]))
         # a term that follows the wander passes only while the noise model holds little slow noise
-        return {"names": list(names_), "fit": Fit(), "preds": {"tag": "pair"}, "in_bounds": True,
+        return {"names": list(names_), "fit": _Fit(), "preds": {"tag": "pair"}, "in_bounds": True,
                 "gain": {"gain": 1.0, "ci": [0.5, 1.5]}, "accepted": K < 0.5, "delta_bic": -20.0}
 
-    class FakeModel:
-        def __init__(self, *args):
-            pass
-
-        def fixed_nonlinear(self, eff):
-            return {}
-
-    class Scorer:
+    class Scorer(_FakeScorer):
         noise_params = [(0.9, 0.1, 1.0)] * 5
-        nominal_train_pred = np.zeros((4, 5))
-        cal = None
-
-        class f:
-            @staticmethod
-            def extra_score_floor(floor):
-                return contextlib.nullcontext()
 
     monkeypatch.setattr(A, "evaluate", fake_evaluate)
-    monkeypatch.setattr(A, "EffectModel", FakeModel)
-    first = {"fit": Fit(), "preds": {"tag": "first"}}
+    monkeypatch.setattr(A, "EffectModel", _FakeModel)
+    first = {"fit": _Fit(), "preds": {"tag": "first"}}
     att = {"single": {a: first}, "selected": [a, c], "final": {"tag": "pair"}, "pair_scan": {c: {}},
            "pair_alternatives": {a: ["reference_drift"]}}
     sc = Scorer()

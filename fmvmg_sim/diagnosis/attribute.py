@@ -248,7 +248,7 @@ class Scorer:
         # consistent with the gain expected were the candidate true, and their summed gain must stand
         # FOLDS_COMBINED_Z scatters above zero (were the candidate false, the sum would centre on
         # -sum(I), so a false one passes with probability below Phi(-FOLDS_COMBINED_Z))
-        if len(testable) < 2 or not all(f["consistent"] and f.get("total", 0.0) > 0 for f in testable):
+        if len(testable) < 2 or not all(f["consistent"] and f["total"] > 0 for f in testable):
             return False
         total = sum(f["total"] for f in testable)
         info = sum(f["info_if_true"] for f in testable)
@@ -408,21 +408,11 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
         best = max(acc, key=lambda n: single[n]["gain"]["gain"])
         selected, final = [best], single[best]
         if max_effects > 1:
-            fixed = EffectModel(scorer.f, scorer.cal, [best]).fixed_nonlinear(final["fit"].effects)
             # every other deterministic effect: a second effect's single-effect fit is dominated by the
             # first one's signature, so its single gain says little about how it does as a second effect
             others = sorted((n for n in single if n != best and single[n]["fit"] is not None),
                             key=lambda n: -single[n]["gain"]["gain"])[:top_pairs]
-            # the first effect's model is accurate to a fraction of its own signature: that fraction
-            # floors the scoring sigma of a second effect, which must explain more than the first one's
-            # model error (else any leftover misfit of a strong first effect buys a spurious second)
-            sig1 = np.abs(final["fit"]._ctx["pred"] - scorer.nominal_train_pred)
-            with scorer.f.extra_score_floor(SECOND_EFFECT_REL_FLOOR * sig1):
-                for n in others:
-                    # the first effect's nonlinear parameter is refitted unless the second has its own
-                    fx = fixed if n in NONLINEAR else {}
-                    pair_scan[n] = evaluate(scorer, [best, n], final["preds"], final["fit"]._ctx["pred"], fx,
-                                            k_base=len(MODELS[best]), new=[n])
+            pair_scan = evaluate_seconds(scorer, best, final, others)
             acc2 = [n for n in pair_scan if pair_scan[n]["accepted"]]
             if acc2:
                 second = max(acc2, key=lambda n: pair_scan[n]["gain"]["gain"])
@@ -489,6 +479,38 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
             "pair_alternatives": pair_alternatives}
 
 
+def evaluate_seconds(scorer: Scorer, best: str, first: dict, names: list) -> dict:
+    """Each of ``names`` fitted beside the accepted effect ``best`` and scored against it alone.
+
+    Parameters
+    ----------
+    scorer : Scorer
+    best : str
+        The first effect.
+    first : dict
+        Its evaluation (:func:`evaluate`).
+    names : list of str
+        Candidate second effects.
+
+    Returns
+    -------
+    dict
+        ``{name: evaluation of [best, name]}``.
+    """
+    fixed = EffectModel(scorer.f, scorer.cal, [best]).fixed_nonlinear(first["fit"].effects)
+    # the first effect's model is accurate to a fraction of its own signature: that fraction floors the
+    # scoring sigma of a second effect, which must explain more than the first one's model error (else any
+    # leftover misfit of a strong first effect buys a spurious second)
+    sig1 = np.abs(first["fit"]._ctx["pred"] - scorer.nominal_train_pred)
+    out = {}
+    with scorer.f.extra_score_floor(SECOND_EFFECT_REL_FLOOR * sig1):
+        for n in names:
+            # the first effect's nonlinear parameter is refitted unless the second has its own
+            out[n] = evaluate(scorer, [best, n], first["preds"], first["fit"]._ctx["pred"],
+                              fixed if n in NONLINEAR else {}, k_base=len(MODELS[best]), new=[n])
+    return out
+
+
 def rejudge_second(scorer: Scorer, att: dict, channel: int, params: tuple) -> dict:
     """Re-score a forward-selected second effect with one channel's noise model replaced.
 
@@ -524,11 +546,7 @@ def rejudge_second(scorer: Scorer, att: dict, channel: int, params: tuple) -> di
     sc2.noise_params = list(scorer.noise_params)
     sc2.noise_params[channel] = params
     first = att["single"][best]
-    fixed = EffectModel(scorer.f, scorer.cal, [best]).fixed_nonlinear(first["fit"].effects)
-    sig1 = np.abs(first["fit"]._ctx["pred"] - scorer.nominal_train_pred)
-    with scorer.f.extra_score_floor(SECOND_EFFECT_REL_FLOOR * sig1):
-        ev = evaluate(sc2, [best, second], first["preds"], first["fit"]._ctx["pred"],
-                      fixed if second in NONLINEAR else {}, k_base=len(MODELS[best]), new=[second])
+    ev = evaluate_seconds(sc2, best, first, [second])[second]
     att["rejudged"] = {"effect": second, "accepted": bool(ev["accepted"]), "gain": ev["gain"]["gain"],
                        "ci": ev["gain"]["ci"]}
     if not ev["accepted"]:

@@ -72,8 +72,24 @@ def lattice_lsb(x_V: np.ndarray) -> tuple[float, float]:
     lsb = float(np.median(small))
     if lsb <= 0:
         return 0.0, 0.0
-    frac = np.abs(x / lsb - np.round(x / lsb))
-    return lsb, float(np.mean(frac < 0.02))
+    return lsb, on_lattice(x, lsb)
+
+
+def on_lattice(x_V: np.ndarray, lsb_V: float) -> float:
+    """Fraction of the finite samples within 2 % of a step of the lattice ``k * lsb_V``.
+
+    Parameters
+    ----------
+    x_V : ndarray
+    lsb_V : float
+
+    Returns
+    -------
+    float
+    """
+    x = np.asarray(x_V, dtype=float)
+    x = x[np.isfinite(x)] / lsb_V
+    return float(np.mean(np.abs(x - np.round(x)) < 0.02)) if len(x) else 0.0
 
 
 @dataclass

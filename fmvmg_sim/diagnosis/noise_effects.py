@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .data import Prepared
+from .data import Prepared, on_lattice
 from .forward import IRATE
 
 #: Excess flicker accepted when the held-out and training z-scores exceed these.
@@ -38,9 +38,7 @@ def quantization_candidate(prep: Prepared, nominal_lsb_V: float) -> dict | None:
     """
     lsb = prep.lattice()[IRATE]
     if lsb > 1.5 * max(nominal_lsb_V, 1e-12):
-        x = prep.obs["rate_V"]
-        x = x[np.isfinite(x)] / lsb
-        return {"lsb_V": lsb, "on_lattice": float(np.mean(np.abs(x - np.round(x)) < 0.02))}
+        return {"lsb_V": lsb, "on_lattice": on_lattice(prep.obs["rate_V"], lsb)}
     return None
 
 
