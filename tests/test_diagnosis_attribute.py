@@ -109,6 +109,7 @@ class _FakeScorer:
     nominal = {"tag": "nominal"}
     nominal_train_pred = np.zeros((4, 5))
     cal = None
+    vref_V = 0.45
 
     class f:
         @staticmethod
@@ -192,3 +193,75 @@ def test_second_effect_rejudged_with_the_records_rate_noise(monkeypatch):
     # nothing to judge: one effect, or a pair fitted from scratch (no forward-selected second)
     assert A.rejudge_second(sc, dict(att, selected=[a]), 0, (0.99, 0.8, 1.0))["rejudged"] is None
     assert A.rejudge_second(sc, dict(att, pair_scan={}), 0, (0.99, 0.8, 1.0))["selected"] == [a, c]
+
+
+def test_reference_drift_without_its_vref_part():
+    """The prior's least Vref share: 1e-5/K x 0.45 V against 2 mV/K, i.e. 2.25e-3 of the rectifier part."""
+    from fmvmg_sim.diagnosis.attribute import reference_lacks_vref
+    assert reference_lacks_vref({"vref_tc_per_K": 2.8e-9, "rectifier_mV_per_K": 3.3e-3}, 0.45)   # a Q drift's fit
+    assert not reference_lacks_vref({"vref_tc_per_K": -1.6e-7, "rectifier_mV_per_K": 1.3e-3}, 0.45)  # share 0.055
+    # the edge of the prior: the least Vref coefficient beside the largest rectifier drift
+    assert not reference_lacks_vref({"vref_tc_per_K": 1e-5, "rectifier_mV_per_K": 2.0}, 0.45)
+    assert reference_lacks_vref({"vref_tc_per_K": 0.9e-5, "rectifier_mV_per_K": -2.0}, 0.45)
+    assert not reference_lacks_vref({"vref_tc_per_K": 0.0, "rectifier_mV_per_K": 0.0}, 0.45)
+
+
+class _RefFit:
+    def __init__(self, vref, rect):
+        self.effects = {"reference_drift": {"vref_tc_per_K": vref, "rectifier_mV_per_K": rect}}
+
+
+def _tie(names, gain, lo, accepted=True, fit=None):
+    return {"names": list(names), "fit": fit if fit is not None else _Fit(), "accepted": accepted,
+            "gain": {"gain": gain, "ci": [lo, gain + 2.0]}}
+
+
+def test_tied_q_drift_ranks_before_a_reference_drift_without_vref():
+    from fmvmg_sim.diagnosis.attribute import prefer_q_drift
+    q, r = "q_factor_drift", "reference_drift"
+    rect_only, with_vref = _RefFit(3e-9, 3e-3), _RefFit(1.6e-7, 1.3e-3)
+    single = {r: _tie([r], 138.9, 130.0, fit=rect_only), q: _tie([q], 138.8, 130.5)}
+    assert prefer_q_drift(single, r, 0.45) == q
+    assert prefer_q_drift(dict(single, **{r: _tie([r], 138.9, 130.0, fit=with_vref)}), r, 0.45) == r
+    assert prefer_q_drift(dict(single, **{q: _tie([q], 125.0, 120.0)}), r, 0.45) == r       # not tied
+    assert prefer_q_drift(dict(single, **{q: _tie([q], 138.8, 130.5, accepted=False)}), r, 0.45) == r
+    assert prefer_q_drift(single, q, 0.45) == q
+    # pairs fitted from scratch: keyed "a+b", the mate kept
+    m = "stress_relaxation"
+    pairs = {f"{r}+{m}": _tie([r, m], 50.0, 40.0, fit=rect_only), f"{q}+{m}": _tie([q, m], 49.0, 41.0)}
+    assert prefer_q_drift(pairs, f"{r}+{m}", 0.45, member=m) == f"{q}+{m}"
+    # a second effect beside a first reference drift is not swapped for the first's look-alike
+    seconds = {m: _tie([r, m], 5.0, 3.0, fit=rect_only), q: _tie([r, q], 4.9, 3.5)}
+    assert prefer_q_drift(seconds, m, 0.45) == m
+
+
+def test_forward_selection_starts_from_the_tied_q_drift(monkeypatch):
+    import fmvmg_sim.diagnosis.attribute as A
+    q, r = "q_factor_drift", "reference_drift"
+
+    def fake_evaluate(scorer, names_, base, base_pred_train, fixed=None, k_base=0, new=None):
+        if list(names_) == [r]:
+            return dict(_tie([r], 139.0, 131.0, fit=_RefFit(3e-9, 3e-3)), preds={"tag": r}, in_bounds=True)
+        if list(names_) == [q]:
+            return dict(_tie([q], 138.8, 131.5), preds={"tag": q}, in_bounds=True)
+        return dict(_tie(names_, -1.0, -2.0, accepted=False), preds={"tag": "x"}, in_bounds=True)
+
+    monkeypatch.setattr(A, "evaluate", fake_evaluate)
+    monkeypatch.setattr(A, "EffectModel", _FakeModel)
+    att = A.attribute(_FakeScorer(), max_effects=2)
+    assert att["selected"] == [q]
+    assert r in ambiguity(att["single"], q)      # the reference drift stays in the ambiguity set
+
+
+def test_q_drift_and_a_rectifier_only_reference_drift_are_one_signature():
+    from fmvmg_sim.diagnosis.attribute import _refuse_q_and_rectifier
+    q, r = "q_factor_drift", "reference_drift"
+    both = _tie([q, r], 30.0, 20.0, fit=_RefFit(4e-9, -9e-3))
+    _refuse_q_and_rectifier(both, 0.45)
+    assert not both["accepted"] and "same signature" in both["why_not"][0]
+    true_pair = _tie([q, r], 30.0, 20.0, fit=_RefFit(-3.8e-6, -1.7e-2))   # Vref part 10 % of the rectifier's
+    _refuse_q_and_rectifier(true_pair, 0.45)
+    assert true_pair["accepted"]
+    other = _tie([r, "duffing"], 30.0, 20.0, fit=_RefFit(4e-9, -9e-3))
+    _refuse_q_and_rectifier(other, 0.45)
+    assert other["accepted"]

@@ -122,6 +122,8 @@ class Scorer:
         self.cal = cal
         #: AR(1) noise model per channel, from the re-simulated null (the same for every model)
         self.noise_params = noise_params
+        #: the AGC set-point (V), for :func:`reference_lacks_vref`
+        self.vref_V = float(fitter.device0.values["circuit"]["reference"]["vref_V"])
         folds = fitter.prep.folds()
         self.train = folds[-1]["train"]
         # a fold whose training window never left one temperature cannot test a temperature law (its
@@ -406,6 +408,7 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
     selected, final, pair_scan, pair_alternatives = [], None, {}, {}
     if acc:
         best = max(acc, key=lambda n: single[n]["gain"]["gain"])
+        best = prefer_q_drift(single, best, scorer.vref_V)
         selected, final = [best], single[best]
         if max_effects > 1:
             # every other deterministic effect: a second effect's single-effect fit is dominated by the
@@ -413,9 +416,12 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
             others = sorted((n for n in single if n != best and single[n]["fit"] is not None),
                             key=lambda n: -single[n]["gain"]["gain"])[:top_pairs]
             pair_scan = evaluate_seconds(scorer, best, final, others)
+            for ev in pair_scan.values():
+                _refuse_q_and_rectifier(ev, scorer.vref_V)
             acc2 = [n for n in pair_scan if pair_scan[n]["accepted"]]
             if acc2:
                 second = max(acc2, key=lambda n: pair_scan[n]["gain"]["gain"])
+                second = prefer_q_drift(pair_scan, second, scorer.vref_V)
                 selected.append(second)
                 final = pair_scan[second]
                 # look-alike second effects: others that explain the same remaining gap as well
@@ -457,9 +463,13 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                                       and all(_beats(scorer, ev, single[m]) for m in (a, n)))
                     if not ev["accepted"]:
                         ev["why_not"] = ["one member adds nothing held-out to the other"]
+                _refuse_q_and_rectifier(ev, scorer.vref_V)
         acc2 = [k for k in pair_scan if pair_scan[k]["accepted"]]
         if acc2:
             k = max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"])
+            if "reference_drift" in pair_scan[k]["names"]:
+                mate = [m for m in pair_scan[k]["names"] if m != "reference_drift"][0]
+                k = prefer_q_drift(pair_scan, k, scorer.vref_V, member=mate)
             final = pair_scan[k]
             selected = sorted(final["names"], key=lambda n: -single[n]["gain"]["gain"])
             # look-alike pairs: a pair sharing one member whose held-out gain reaches the best one's interval
@@ -477,6 +487,79 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                         pair_alternatives[swapped].append(alt)
     return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan,
             "pair_alternatives": pair_alternatives}
+
+
+def reference_lacks_vref(params: dict, vref_V: float) -> bool:
+    """Whether a fitted reference drift carries less Vref drift than its own prior allows.
+
+    Reference drift moves the real drive amplitude through two parts: the Vref temperature coefficient
+    (which the measured drive amplitude follows) and the rectifier offset drift (which it does not,
+    ``-rectifier / Vref`` per kelvin). The rectifier part alone moves the AGC effort, the quadrature and the
+    bias in proportion, linearly in temperature: after calibration this is what a Q drift does, and the
+    record cannot tell the two apart. A bandgap reference always drifts, though (physics brief: 10-50
+    ppm/K beside the rectifier's mV/K): by the prior ranges of
+    :data:`fmvmg_sim.effects.MODELS` the Vref part is at least ``vref_lo Vref / rectifier_hi`` of the
+    rectifier part. A fit below that share is a rectifier-only drift, which the prior does not expect.
+
+    Parameters
+    ----------
+    params : dict
+        ``vref_tc_per_K`` (1/K) and ``rectifier_mV_per_K``.
+    vref_V : float
+        The AGC set-point.
+
+    Returns
+    -------
+    bool
+    """
+    m = MODELS["reference_drift"]
+    least = m["vref_tc_per_K"].prior[0] * vref_V / (m["rectifier_mV_per_K"].prior[1] * 1e-3)
+    vref_part = abs(params["vref_tc_per_K"]) * vref_V
+    rect_part = abs(params["rectifier_mV_per_K"]) * 1e-3
+    return bool(rect_part > 0 and vref_part < least * rect_part)
+
+
+def _refuse_q_and_rectifier(ev: dict, vref_V: float) -> None:
+    """Refuse a Q drift paired with a reference drift that lacks its Vref part: one signature twice.
+
+    Beside a strong Q drift the rectifier part fits what the Q drift's model leaves (its curvature in
+    temperature), so the pair passes without a second effect behind it."""
+    if (ev["accepted"] and ev["fit"] is not None and set(ev["names"]) == {"q_factor_drift", "reference_drift"}
+            and reference_lacks_vref(ev["fit"].effects["reference_drift"], vref_V)):
+        ev["accepted"] = False
+        ev["why_not"] = ["a reference drift without its Vref part beside a Q drift: the same signature twice"]
+
+
+def prefer_q_drift(evals: dict, chosen: str, vref_V: float, member: str | None = None) -> str:
+    """The Q drift in place of a chosen reference drift that lacks its Vref part, when the two tie.
+
+    Parameters
+    ----------
+    evals : dict
+        Evaluations by key (single effects, second effects, or pairs).
+    chosen : str
+        The key with the best held-out gain.
+    vref_V : float
+    member : str, optional
+        The other member when the keys are pairs (``"a+b"``); None for single or second effects.
+
+    Returns
+    -------
+    str
+        ``chosen``, or the key with ``q_factor_drift`` in place of ``reference_drift`` when that one is
+        accepted, its held-out gain reaches ``chosen``'s interval, and ``chosen``'s reference drift fit lacks
+        its Vref part (:func:`reference_lacks_vref`).
+    """
+    ev = evals[chosen]
+    ref = "+".join(sorted(("reference_drift", member))) if member is not None else "reference_drift"
+    if chosen != ref or ev["fit"] is None:
+        return chosen
+    alt = "+".join(sorted(("q_factor_drift", member))) if member is not None else "q_factor_drift"
+    other = evals.get(alt)
+    if (other is None or not other["accepted"] or other["gain"]["gain"] < ev["gain"]["ci"][0]
+            or not reference_lacks_vref(ev["fit"].effects["reference_drift"], vref_V)):
+        return chosen
+    return alt
 
 
 def evaluate_seconds(scorer: Scorer, best: str, first: dict, names: list) -> dict:

@@ -198,6 +198,26 @@ def _rate_residual(prep: Prepared, pred_b: np.ndarray, rate_V: np.ndarray) -> np
     return (rate_V - np.interp(prep.t_mid_s, tb, pred_b[:, IRATE])) / prep.sf_nominal_V_per_dps
 
 
+def rank_rows(rows: list[dict], accepted: list[str]) -> list[dict]:
+    """The report's ranking: the accepted effects in their order, then the candidates that passed alone,
+    then the rest, each group by held-out gain.
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per effect, with ``effect``, ``accepted`` (passed alone) and ``heldout_gain``.
+    accepted : list of str
+        The verdict's effects (a second effect may not have passed alone).
+
+    Returns
+    -------
+    list of dict
+    """
+    order = {n: i for i, n in enumerate(accepted)}
+    return sorted(rows, key=lambda r: (order.get(r["effect"], len(order)), 0 if r["accepted"] else 1,
+                                       -(r["heldout_gain"] if r["heldout_gain"] is not None else -1e300)))
+
+
 def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, progress: bool | None = None,
              log=None) -> dict:
     """Diagnose the sim-to-real gap of a record against a nominal scenario.
@@ -375,9 +395,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     remainder = None
     if sig_located and not accepted:
         remainder = {"significant": [{"group": g, "name": n, "p_holm": p} for g, n, p in sig]}
-    order = {n: i for i, n in enumerate(accepted)}
-    ranked.sort(key=lambda r: (0 if r["accepted"] else 1, order.get(r["effect"], 99),
-                               -(r["heldout_gain"] if r["heldout_gain"] is not None else -1e300)))
+    ranked = rank_rows(ranked, accepted)
     lookalike_of = {o: a for a, others in amb.items() for o in others}
     for r in ranked:
         r["accepted"] = r["effect"] in accepted
