@@ -22,6 +22,10 @@ Two effects: forward selection (the best accepted effect, then each other candid
 with it, scored against the one-effect model); when no single effect passes, pairs fitted from
 scratch, each pair scored against each of its members alone. Noise-level effects (quantisation, flicker) are
 judged separately: the rate output's lattice, and the Allan flicker band against the null.
+
+A Q drift and a reference drift whose Vref part is below the least share its prior allows beside the
+rectifier part (:func:`reference_lacks_vref`) carry one signature: when they tie the Q drift ranks first
+(:func:`prefer_q_drift`), and the two are not accepted as a pair.
 """
 
 from __future__ import annotations
