@@ -201,12 +201,12 @@ def test_reference_drift_without_its_vref_part():
     assert reference_lacks_vref({"vref_tc_per_K": 2.8e-9, "rectifier_mV_per_K": 3.3e-3}, 0.45)   # a Q drift's fit
     assert not reference_lacks_vref({"vref_tc_per_K": -1.6e-7, "rectifier_mV_per_K": 1.3e-3}, 0.45)  # share 0.055
     # the edge of the prior: the least Vref coefficient beside the largest rectifier drift
-    assert not reference_lacks_vref({"vref_tc_per_K": 1e-5, "rectifier_mV_per_K": 2.0}, 0.45)
-    assert reference_lacks_vref({"vref_tc_per_K": 0.9e-5, "rectifier_mV_per_K": -2.0}, 0.45)
+    assert not reference_lacks_vref({"vref_tc_per_K": 1.01e-5, "rectifier_mV_per_K": 2.0}, 0.45)
+    assert reference_lacks_vref({"vref_tc_per_K": 0.99e-5, "rectifier_mV_per_K": -2.0}, 0.45)
     assert not reference_lacks_vref({"vref_tc_per_K": 0.0, "rectifier_mV_per_K": 0.0}, 0.45)
 
 
-class _RefFit:
+class _RefFit(_Fit):
     def __init__(self, vref, rect):
         self.effects = {"reference_drift": {"vref_tc_per_K": vref, "rectifier_mV_per_K": rect}}
 
@@ -230,9 +230,7 @@ def test_tied_q_drift_ranks_before_a_reference_drift_without_vref():
     m = "stress_relaxation"
     pairs = {f"{r}+{m}": _tie([r, m], 50.0, 40.0, fit=rect_only), f"{q}+{m}": _tie([q, m], 49.0, 41.0)}
     assert prefer_q_drift(pairs, f"{r}+{m}", 0.45, member=m) == f"{q}+{m}"
-    # a second effect beside a first reference drift is not swapped for the first's look-alike
-    seconds = {m: _tie([r, m], 5.0, 3.0, fit=rect_only), q: _tie([r, q], 4.9, 3.5)}
-    assert prefer_q_drift(seconds, m, 0.45) == m
+    assert prefer_q_drift(pairs, f"{q}+{m}", 0.45, member=m) == f"{q}+{m}"
 
 
 def test_forward_selection_starts_from_the_tied_q_drift(monkeypatch):
@@ -265,3 +263,61 @@ def test_q_drift_and_a_rectifier_only_reference_drift_are_one_signature():
     other = _tie([r, "duffing"], 30.0, 20.0, fit=_RefFit(4e-9, -9e-3))
     _refuse_q_and_rectifier(other, 0.45)
     assert other["accepted"]
+
+
+def _table_attribution(monkeypatch, table, scratch=False):
+    """attribute() on fake evaluations looked up by effect set: ``{frozenset: (gain, lo, accepted, fit)}``."""
+    import fmvmg_sim.diagnosis.attribute as A
+
+    def fake_evaluate(scorer, names_, base, base_pred_train, fixed=None, k_base=0, new=None):
+        gain, lo, accepted, fit = table.get(frozenset(names_), (-1.0, -2.0, False, None))
+        ev = _tie(sorted(names_), gain, lo, accepted=accepted, fit=fit)
+        return dict(ev, preds={"tag": "+".join(sorted(names_))}, in_bounds=True, delta_bic=-20.0 if accepted else 0.0)
+
+    class Scorer(_FakeScorer):
+        @staticmethod
+        def folds_ok(g):
+            return True
+
+    monkeypatch.setattr(A, "evaluate", fake_evaluate)
+    monkeypatch.setattr(A, "EffectModel", _FakeModel)
+    if scratch:   # both members matter in every pair: the refusal and the swap are what is tested
+        monkeypatch.setattr(A, "_significant_param", lambda fit, names: True)
+        monkeypatch.setattr(A, "_beats", lambda scorer, ev, other: True)
+    return A.attribute(Scorer(), max_effects=2)
+
+
+Q, R, H, S = "q_factor_drift", "reference_drift", "thermal_hysteresis", "stress_relaxation"
+
+
+def test_forward_selected_second_effect_is_the_tied_q_drift(monkeypatch):
+    rect_only = _RefFit(3e-9, 3e-3)
+    att = _table_attribution(monkeypatch, {
+        frozenset({H}): (50.0, 40.0, True, _Fit()),
+        frozenset({H, R}): (5.0, 3.0, True, rect_only),
+        frozenset({H, Q}): (4.9, 3.5, True, _Fit())})
+    assert att["selected"] == [H, Q]
+    assert att["pair_alternatives"] == {Q: [R]}          # the reference drift stays the second's look-alike
+
+
+def test_q_drift_is_not_paired_with_a_rectifier_only_reference_drift(monkeypatch):
+    att = _table_attribution(monkeypatch, {
+        frozenset({Q}): (50.0, 40.0, True, _Fit()),
+        frozenset({Q, R}): (6.0, 4.0, True, _RefFit(4e-9, -9e-3)),     # the better "second", refused
+        frozenset({Q, H}): (3.0, 1.0, True, _Fit())})
+    assert att["selected"] == [Q, H]
+    assert not att["pair_scan"][R]["accepted"] and "same signature" in att["pair_scan"][R]["why_not"][0]
+    assert att["pair_alternatives"] == {}                 # nor reported as a look-alike of the second effect
+
+
+def test_pair_from_scratch_swaps_in_the_q_drift_and_refuses_q_with_rectifier(monkeypatch):
+    rect_only = _RefFit(3e-9, 3e-3)
+    weak = (5.0, 1.0, False, _Fit())                      # no single effect passes: pairs from scratch
+    att = _table_attribution(monkeypatch, {
+        frozenset({Q}): weak, frozenset({R}): (5.0, 1.0, False, rect_only), frozenset({S}): weak,
+        frozenset({Q, R}): (55.0, 45.0, True, rect_only),  # the best pair, one signature twice: refused
+        frozenset({R, S}): (50.0, 40.0, True, rect_only),
+        frozenset({Q, S}): (49.0, 41.0, True, _Fit())}, scratch=True)
+    assert sorted(att["selected"]) == sorted([Q, S])
+    assert att["pair_scan"]["+".join(sorted((Q, R)))]["same_signature"]
+    assert att["pair_alternatives"] == {Q: [R]}          # R beside S is the look-alike; Q beside R is not

@@ -479,7 +479,8 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
             # look-alike pairs: a pair sharing one member whose held-out gain reaches the best one's interval
             lo = final["gain"]["ci"][0]
             for k2, ev in pair_scan.items():
-                if k2 == k or ev["fit"] is None or ev["gain"]["gain"] < lo or not ev["in_bounds"]:
+                if (k2 == k or ev["fit"] is None or ev["gain"]["gain"] < lo or not ev["in_bounds"]
+                        or ev.get("same_signature")):
                     continue
                 shared = set(ev["names"]) & set(selected)
                 if len(shared) == 1:
@@ -504,6 +505,9 @@ def reference_lacks_vref(params: dict, vref_V: float) -> bool:
     ppm/K beside the rectifier's mV/K): by the prior ranges of
     :data:`fmvmg_sim.effects.MODELS` the Vref part is at least ``vref_lo Vref / rectifier_hi`` of the
     rectifier part. A fit below that share is a rectifier-only drift, which the prior does not expect.
+    The share uses the prior's typical ranges, not the physical bounds (a rectifier drift of 5 mV/K beside
+    a Vref coefficient of 1e-5/K counts as lacking): the rule only breaks ties between look-alikes, and
+    the typical ranges are what the physics brief expects of a real board.
 
     Parameters
     ----------
@@ -515,6 +519,7 @@ def reference_lacks_vref(params: dict, vref_V: float) -> bool:
     Returns
     -------
     bool
+        True when the Vref part is below the least share.
     """
     m = MODELS["reference_drift"]
     least = m["vref_tc_per_K"].prior[0] * vref_V / (m["rectifier_mV_per_K"].prior[1] * 1e-3)
@@ -527,10 +532,20 @@ def _refuse_q_and_rectifier(ev: dict, vref_V: float) -> None:
     """Refuse a Q drift paired with a reference drift that lacks its Vref part: one signature twice.
 
     Beside a strong Q drift the rectifier part fits what the Q drift's model leaves (its curvature in
-    temperature), so the pair passes without a second effect behind it."""
+    temperature), so the pair passes without a second effect behind it. The refused evaluation is marked
+    ``same_signature`` and kept out of the ambiguity sets.
+
+    Parameters
+    ----------
+    ev : dict
+        An evaluation (:func:`evaluate`); changed in place.
+    vref_V : float
+        The AGC set-point.
+    """
     if (ev["accepted"] and ev["fit"] is not None and set(ev["names"]) == {"q_factor_drift", "reference_drift"}
             and reference_lacks_vref(ev["fit"].effects["reference_drift"], vref_V)):
         ev["accepted"] = False
+        ev["same_signature"] = True  # not a look-alike of anything either
         ev["why_not"] = ["a reference drift without its Vref part beside a Q drift: the same signature twice"]
 
 
@@ -544,6 +559,7 @@ def prefer_q_drift(evals: dict, chosen: str, vref_V: float, member: str | None =
     chosen : str
         The key with the best held-out gain.
     vref_V : float
+        The AGC set-point.
     member : str, optional
         The other member when the keys are pairs (``"a+b"``); None for single or second effects.
 
@@ -665,4 +681,4 @@ def ambiguity(single: dict, best: str) -> list[str]:
     """
     lo = single[best]["gain"]["ci"][0]
     return [n for n, ev in single.items() if n != best and ev["fit"] is not None and ev["in_bounds"]
-            and ev["gain"]["gain"] >= lo and ev["gain"]["ci"][0] > 0]
+            and ev["gain"]["gain"] >= lo and ev["gain"]["ci"][0] > 0 and not ev.get("same_signature")]

@@ -199,8 +199,10 @@ def _rate_residual(prep: Prepared, pred_b: np.ndarray, rate_V: np.ndarray) -> np
 
 
 def rank_rows(rows: list[dict], accepted: list[str]) -> list[dict]:
-    """The report's ranking: the accepted effects in their order, then the candidates that passed alone,
-    then the rest, each group by held-out gain.
+    """The report's ranking of the candidate rows.
+
+    The verdict's effects come first, in the verdict's order; then the candidates that passed alone, then
+    the rest, each of these two groups by held-out gain.
 
     Parameters
     ----------
@@ -212,6 +214,7 @@ def rank_rows(rows: list[dict], accepted: list[str]) -> list[dict]:
     Returns
     -------
     list of dict
+        The rows, reordered.
     """
     order = {n: i for i, n in enumerate(accepted)}
     return sorted(rows, key=lambda r: (order.get(r["effect"], len(order)), 0 if r["accepted"] else 1,
