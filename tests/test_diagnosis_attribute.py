@@ -226,11 +226,11 @@ def test_tied_q_drift_ranks_before_a_reference_drift_without_vref():
     assert prefer_q_drift(dict(single, **{q: _tie([q], 125.0, 120.0)}), r, 0.45) == r       # not tied
     assert prefer_q_drift(dict(single, **{q: _tie([q], 138.8, 130.5, accepted=False)}), r, 0.45) == r
     assert prefer_q_drift(single, q, 0.45) == q
-    # pairs fitted from scratch: keyed "a+b", the mate kept
+    # pairs fitted from scratch: keyed "a+b" (sorted), the mate kept
     m = "stress_relaxation"
     pairs = {f"{r}+{m}": _tie([r, m], 50.0, 40.0, fit=rect_only), f"{q}+{m}": _tie([q, m], 49.0, 41.0)}
-    assert prefer_q_drift(pairs, f"{r}+{m}", 0.45, member=m) == f"{q}+{m}"
-    assert prefer_q_drift(pairs, f"{q}+{m}", 0.45, member=m) == f"{q}+{m}"
+    assert prefer_q_drift(pairs, f"{r}+{m}", 0.45) == f"{q}+{m}"
+    assert prefer_q_drift(pairs, f"{q}+{m}", 0.45) == f"{q}+{m}"
 
 
 def test_forward_selection_starts_from_the_tied_q_drift(monkeypatch):

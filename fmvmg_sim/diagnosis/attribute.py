@@ -470,10 +470,7 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                 _refuse_q_and_rectifier(ev, scorer.vref_V)
         acc2 = [k for k in pair_scan if pair_scan[k]["accepted"]]
         if acc2:
-            k = max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"])
-            if "reference_drift" in pair_scan[k]["names"]:
-                mate = [m for m in pair_scan[k]["names"] if m != "reference_drift"][0]
-                k = prefer_q_drift(pair_scan, k, scorer.vref_V, member=mate)
+            k = prefer_q_drift(pair_scan, max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"]), scorer.vref_V)
             final = pair_scan[k]
             selected = sorted(final["names"], key=lambda n: -single[n]["gain"]["gain"])
             # look-alike pairs: a pair sharing one member whose held-out gain reaches the best one's interval
@@ -549,19 +546,17 @@ def _refuse_q_and_rectifier(ev: dict, vref_V: float) -> None:
         ev["why_not"] = ["a reference drift without its Vref part beside a Q drift: the same signature twice"]
 
 
-def prefer_q_drift(evals: dict, chosen: str, vref_V: float, member: str | None = None) -> str:
+def prefer_q_drift(evals: dict, chosen: str, vref_V: float) -> str:
     """The Q drift in place of a chosen reference drift that lacks its Vref part, when the two tie.
 
     Parameters
     ----------
     evals : dict
-        Evaluations by key (single effects, second effects, or pairs).
+        Evaluations by key: an effect name (single or second effects) or a sorted pair ``"a+b"``.
     chosen : str
         The key with the best held-out gain.
     vref_V : float
         The AGC set-point.
-    member : str, optional
-        The other member when the keys are pairs (``"a+b"``); None for single or second effects.
 
     Returns
     -------
@@ -571,10 +566,10 @@ def prefer_q_drift(evals: dict, chosen: str, vref_V: float, member: str | None =
         its Vref part (:func:`reference_lacks_vref`).
     """
     ev = evals[chosen]
-    ref = "+".join(sorted(("reference_drift", member))) if member is not None else "reference_drift"
-    if chosen != ref or ev["fit"] is None:
+    parts = chosen.split("+")
+    if "reference_drift" not in parts or ev["fit"] is None:
         return chosen
-    alt = "+".join(sorted(("q_factor_drift", member))) if member is not None else "q_factor_drift"
+    alt = "+".join(sorted("q_factor_drift" if p == "reference_drift" else p for p in parts))
     other = evals.get(alt)
     if (other is None or not other["accepted"] or other["gain"]["gain"] < ev["gain"]["ci"][0]
             or not reference_lacks_vref(ev["fit"].effects["reference_drift"], vref_V)):
