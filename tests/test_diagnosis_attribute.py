@@ -4,7 +4,7 @@ import contextlib
 
 import numpy as np
 
-from fmvmg_sim.diagnosis.attribute import _in_bounds, ambiguity, separating_experiment
+from fmvmg_sim.diagnosis.attribute import _in_bounds, _significant_param, ambiguity, param_z, separating_experiment
 
 
 def _ev(gain, lo, inb=True, fit=True):
@@ -36,6 +36,26 @@ def test_why_not_names_each_failed_criterion():
     bad = {"gain": {"ci": [-0.1, 2.0]}, "delta_bic": -5.0, "in_bounds": False, "param_significant": False}
     assert len(why_not(bad, folds_ok=True)) == 4
     assert why_not(dict(good, delta_bic=-5.0), True) == ["dBIC not below -10"]
+
+
+def test_parameter_z_is_value_over_noise_model_sd():
+    """The largest |value| / sd over the named effects' parameters; undefined errors are skipped; a thermal
+    lag is judged by its held-out gain (its time constant), so its z is infinite."""
+    class _MF:
+        effects = {"quadrature_drift": {"beta_per_K": 3e-4}, "reference_drift": {"vref_tc_per_K": -2e-6,
+                                                                                  "rectifier_mV_per_K": 0.5},
+                   "thermal_lag": {"tau_s": 600.0, "offset_K": 0.0}}
+        sd_noise = {"quadrature_drift": {"beta_per_K": 2e-4}, "reference_drift": {"vref_tc_per_K": 1e-6,
+                                                                                   "rectifier_mV_per_K": np.nan},
+                    "thermal_lag": {"offset_K": 1.0}}
+    mf = _MF()
+    assert np.isclose(param_z(mf, ["quadrature_drift"]), 1.5)
+    assert np.isclose(param_z(mf, ["reference_drift"]), 2.0)
+    assert np.isclose(param_z(mf, ["quadrature_drift", "reference_drift"]), 2.0)
+    assert param_z(mf, ["thermal_lag"]) == np.inf
+    assert not _significant_param(mf, ["quadrature_drift"]) and not _significant_param(mf, ["reference_drift"])
+    mf.effects["reference_drift"]["vref_tc_per_K"] = -2.1e-6
+    assert _significant_param(mf, ["reference_drift"]) and _significant_param(mf, ["thermal_lag"])
 
 
 def test_separating_experiment_is_symmetric():

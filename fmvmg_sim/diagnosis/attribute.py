@@ -297,20 +297,36 @@ def _in_bounds(eff: dict) -> bool:
     return True
 
 
+def param_z(mf: ModelFit, names: list) -> float:
+    """Largest ``|value| / sd`` among the linear parameters of ``names`` (noise-model standard errors).
+
+    Parameters
+    ----------
+    mf : ModelFit
+    names : list of str
+
+    Returns
+    -------
+    float
+        ``inf`` for the thermal lag (its effect is its time constant, scored by the held-out gain).
+    """
+    z = 0.0
+    for n in names:
+        if n == "thermal_lag" and "offset_K" in mf.effects.get(n, {}):
+            return float("inf")
+        for p, sd in mf.sd_noise.get(n, {}).items():
+            if np.isfinite(sd) and sd > 0:
+                z = max(z, abs(mf.effects[n][p]) / sd)
+    return float(z)
+
+
 def _significant_param(mf: ModelFit, names: list) -> bool:
     """One linear parameter of ``names`` more than 2 noise-model standard errors from zero.
 
     The held-out gain judges whether the effect generalises; this only asks that the data (not the
     prior) pulled it away from "no effect". The chi-square-inflated errors would make every effect
     look insignificant whenever some other misfit dominates the training residual."""
-    for n in names:
-        for p, sd in mf.sd_noise.get(n, {}).items():
-            v = mf.effects[n][p]
-            if np.isfinite(sd) and sd > 0 and abs(v) > 2 * sd:
-                return True
-            if n == "thermal_lag" and p == "offset_K":
-                return True  # the lag's effect is its time constant, scored by the held-out gain
-    return False
+    return param_z(mf, names) > 2.0
 
 
 def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarray, fixed: dict | None = None,
@@ -349,9 +365,9 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
     k = sum(len(MODELS[n]) for n in names) - k_base
     dbic = scorer.delta_bic(mf._ctx["pred"], base_pred_train, k)
     inb = _in_bounds(mf.effects)
-    sig = _significant_param(mf, list(new if new is not None else names))
+    z = param_z(mf, list(new if new is not None else names))
     ev = {"names": list(names), "fit": mf, "preds": preds, "gain": g, "delta_bic": float(dbic),
-          "in_bounds": inb, "param_significant": sig}
+          "in_bounds": inb, "param_significant": z > 2.0, "param_z": z}
     ev["why_not"] = why_not(ev, scorer.folds_ok(g))
     ev["accepted"] = not ev["why_not"]
     return ev

@@ -433,10 +433,13 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     }
     report["_debug"] = {"single": {n: {"gain": ev["gain"].get("by_channel"), "dbic": ev["delta_bic"],
                                        "folds": ev["gain"].get("folds"), "ci": ev["gain"]["ci"],
-                                       "acc": ev["accepted"]}
+                                       "acc": ev["accepted"], "why_not": ev.get("why_not"),
+                                       "z": ev.get("param_z")}
                                    for n, ev in att["single"].items() if ev["fit"] is not None},
                         "pairs": {n: {"gain": ev["gain"].get("by_channel"), "ci": ev["gain"]["ci"],
                                       "dbic": ev["delta_bic"], "acc": ev["accepted"],
+                                      "why_not": ev.get("why_not"), "params": ev["fit"].effects,
+                                      "z": ev.get("param_z"),
                                       "folds": ev["gain"].get("folds")}
                                   for n, ev in att["pair_scan"].items() if ev["fit"] is not None},
                         "noise": noise_params, "rejudged": att.get("rejudged")}
