@@ -44,6 +44,8 @@ from .likelihood import block_bootstrap_ci, expected_gain, fit_params, nll, nll_
 from .model import NONLINEAR, EffectModel, ModelFit
 
 DELTA_BIC_MAX = -10.0
+#: A candidate's parameters must stand this many noise-model standard errors from zero (:func:`param_z`).
+PARAM_Z_MIN = 2.0
 FOLDS_NEEDED = 2
 #: A fold passes when its held-out log-likelihood gain (summed over its blocks) is at least this (odds of
 #: 20:1) with a bootstrap interval above zero: a smooth candidate that differs from the baseline by a
@@ -321,12 +323,12 @@ def param_z(mf: ModelFit, names: list) -> float:
 
 
 def _significant_param(mf: ModelFit, names: list) -> bool:
-    """One linear parameter of ``names`` more than 2 noise-model standard errors from zero.
+    """One linear parameter of ``names`` more than :data:`PARAM_Z_MIN` noise-model standard errors from zero.
 
     The held-out gain judges whether the effect generalises; this only asks that the data (not the
     prior) pulled it away from "no effect". The chi-square-inflated errors would make every effect
     look insignificant whenever some other misfit dominates the training residual."""
-    return param_z(mf, names) > 2.0
+    return param_z(mf, names) > PARAM_Z_MIN
 
 
 def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarray, fixed: dict | None = None,
@@ -367,7 +369,7 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
     inb = _in_bounds(mf.effects)
     z = param_z(mf, list(new if new is not None else names))
     ev = {"names": list(names), "fit": mf, "preds": preds, "gain": g, "delta_bic": float(dbic),
-          "in_bounds": inb, "param_significant": z > 2.0, "param_z": z}
+          "in_bounds": inb, "param_significant": z > PARAM_Z_MIN, "param_z": z}
     ev["why_not"] = why_not(ev, scorer.folds_ok(g))
     ev["accepted"] = not ev["why_not"]
     return ev
@@ -397,7 +399,7 @@ def why_not(ev: dict, folds_ok: bool) -> list[str]:
     if not ev["in_bounds"]:
         out.append("a parameter outside or pinned at its physical bound")
     if not ev["param_significant"]:
-        out.append("no parameter 2 standard errors from zero")
+        out.append(f"no parameter {PARAM_Z_MIN:g} standard errors from zero")
     return out
 
 
