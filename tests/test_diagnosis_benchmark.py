@@ -23,3 +23,15 @@ def test_tiny_benchmark(tmp_path, capsys):
     for lab in (json.loads(p.read_text()) for p in (out / "labels").glob("*.json")):
         for n, snr in lab["snr_by_effect"].items():
             assert abs(np.log(snr / lab["snr_target"])) < np.log(1.3), (n, snr, lab["snr_target"])
+
+
+def test_bad_case_mix_is_exit_2_naming_the_option(tmp_path, capsys):
+    for argv, flag, text in [(["--effects", "q_factor_drift,nope"], "--effects", "unknown effect nope"),
+                             (["--effects", ",", "--mix", "single"], "--effects", "no effect named"),
+                             (["--effects", "duffing", "--mix", "pair"], "--effects", "at least two effects"),
+                             (["--snr-min", "50", "--snr-max", "20"], "--snr-min/--snr-max", "0 < min < max")]:
+        out = tmp_path / "never"
+        rc = main(["diagnose-benchmark", "--cases", "2", "-o", str(out)] + argv)
+        err = capsys.readouterr().err
+        assert rc == 2 and flag in err and text in err, (argv, rc, err)
+        assert not out.exists()                  # nothing half-written

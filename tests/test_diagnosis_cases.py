@@ -124,3 +124,35 @@ def test_scaled_cases_stay_clear_of_physical_bounds():
     assert -0.2 < eff["stress_relaxation"]["quad_rel"] <= -0.19 and eff["stress_relaxation"]["tau_h"] == 20.0
     assert _in_bounds(eff)
     assert not _in_bounds({"stress_relaxation": {"quad_rel": -0.2, "tau_h": 20.0}})
+
+
+def test_case_mix_checks_its_choices():
+    from fmvmg_sim.diagnosis.cases import P_NULL, P_SINGLE, SNR_TARGET, CaseMix, MixError
+    from fmvmg_sim.effects import MODELS
+    d = CaseMix.build()
+    assert d == CaseMix() and d.effects == tuple(MODELS) and (d.p_null, d.p_single) == (P_NULL, P_SINGLE)
+    assert d.snr_range == SNR_TARGET
+    # library order, duplicates dropped
+    m = CaseMix.build(["reference_drift", "q_factor_drift", "reference_drift"], "single", 10.0, 1000.0)
+    assert m.effects == ("q_factor_drift", "reference_drift") and (m.p_null, m.p_single) == (0.0, 1.0)
+    assert CaseMix.build(["duffing", "feedthrough"], "pair").p_single == 0.0
+    for args, field in [((["q_drift"],), "effects"), ((None, "triple"), "kind"), ((["duffing"], "default"), "effects"),
+                        ((None, "single", 0.0, 10.0), "snr"), ((None, "single", 10.0, 10.0), "snr"),
+                        ((None, "single", 1.0, float("inf")), "snr")]:
+        with pytest.raises(MixError) as e:
+            CaseMix.build(*args)
+        assert e.value.field == field, (args, e.value.field)
+    assert "q_factor_drift" in str(pytest.raises(MixError, CaseMix.build, ["q_drift"]).value)   # lists the known ones
+
+
+def test_a_narrow_mix_draws_single_effects_from_its_pool(tmp_path):
+    from fmvmg_sim.diagnosis.cases import CaseMix, make_case
+    mix = CaseMix.build(["q_factor_drift", "reference_drift"], "single", 10.0, 1000.0)
+    for k in range(2):
+        lab = make_case(k, 60221, tmp_path, str(NOMINAL), duration_s=1.1 * 3600.0, mix=mix)
+        assert len(lab["effects"]) == 1 and set(lab["effects"]) <= set(mix.effects)
+        assert 10.0 <= lab["snr_target"] <= 1000.0
+    # the default mix draws the same case as before the mix existed (no mix given)
+    a = make_case(5, 4242, tmp_path / "a", str(NOMINAL), duration_s=1.1 * 3600.0)
+    b = make_case(5, 4242, tmp_path / "b", str(NOMINAL), duration_s=1.1 * 3600.0, mix=CaseMix())
+    assert {k: v for k, v in a.items() if k != "record"} == {k: v for k, v in b.items() if k != "record"}

@@ -27,6 +27,13 @@ def register(sub) -> None:
     p.add_argument("--rate-hz", type=float, default=1.0, help="case output rate (default 1 Hz)")
     p.add_argument("--null-runs", type=int, default=4, help="null re-simulations per diagnosis (default 4)")
     p.add_argument("--workers", type=int, default=2, help="LocalCluster workers (default 2)")
+    p.add_argument("--effects", default=None, metavar="NAME[,NAME...]",
+                   help="draw effects only from these (default: the whole library)")
+    p.add_argument("--mix", default="default", choices=("default", "single", "pair"),
+                   help="default: ~20 %% null, ~55 %% one effect, ~25 %% two; single: one effect each; "
+                        "pair: two effects each")
+    p.add_argument("--snr-min", type=float, default=1.0, help="least signature SNR target (default 1)")
+    p.add_argument("--snr-max", type=float, default=1000.0, help="largest signature SNR target (default 1000)")
     p.add_argument("--json", action="store_true", help="print the scores as one JSON object on stdout")
     p.set_defaults(func=main)
 
@@ -43,6 +50,7 @@ def main(args) -> int:
     int
     """
     from ..diagnosis.benchmark import run_benchmark
+    from ..diagnosis.cases import CaseMix, MixError
     from ..errors import InputError
     if args.cases < 1:
         raise InputError("must be >= 1", "--cases")
@@ -51,8 +59,16 @@ def main(args) -> int:
     scn = args.scenario or str(Path(__file__).resolve().parents[2] / "scenarios" / "nominal_a.toml")
     if not Path(scn).is_file():
         raise InputError("file not found", scn)
+    effects = [e.strip() for e in args.effects.split(",") if e.strip()] if args.effects is not None else None
+    if effects is not None and not effects:
+        raise InputError("no effect named", "--effects")
+    try:
+        mix = CaseMix.build(effects, args.mix, args.snr_min, args.snr_max)
+    except MixError as exc:
+        flag = {"effects": "--effects", "kind": "--mix", "snr": "--snr-min/--snr-max"}[exc.field]
+        raise InputError(str(exc), flag) from None
     sc = run_benchmark(args.cases, args.seed, Path(args.out), scn, args.scheduler, args.duration_h * 3600.0,
-                       args.rate_hz, args.null_runs, args.workers, progress=True)
+                       args.rate_hz, args.null_runs, args.workers, progress=True, mix=mix)
     slim = {k: v for k, v in sc.items() if k != "rows"}
     if args.json:
         sys.stdout.write(json.dumps(slim, default=float) + "\n")

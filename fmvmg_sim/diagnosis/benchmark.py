@@ -46,10 +46,10 @@ def _diagnose_case(record: str, scenario: str, n_null: int, out_dir: str) -> dic
             "combined": cj.get("combined"), "wall_time_s": cj["wall_time_s"]}
 
 
-def _make(k, seed, out, scenario, duration_s, rate_Hz):
+def _make(k, seed, out, scenario, duration_s, rate_Hz, mix=None):
     from . import pipeline  # noqa: F401  (bind the whole diagnosis code in the worker before any case)
     from .cases import make_case
-    return make_case(k, seed, Path(out), scenario, duration_s, rate_Hz)
+    return make_case(k, seed, Path(out), scenario, duration_s, rate_Hz, mix)
 
 
 def param_errors(effect: str, truth: dict, est: dict) -> list[float]:
@@ -163,7 +163,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
 
 def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: str | None = None,
                   duration_s: float = 3 * 3600.0, rate_Hz: float = 1.0, n_null: int = 4,
-                  n_workers: int = 2, progress: bool = True) -> dict:
+                  n_workers: int = 2, progress: bool = True, mix=None) -> dict:
     """Generate, diagnose (on Dask) and score ``n_cases`` cases.
 
     Parameters
@@ -180,6 +180,8 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
         Null re-simulations per diagnosis.
     n_workers : int, optional
     progress : bool, optional
+    mix : CaseMix, optional
+        What the cases are drawn from (default: the issue's mix).
 
     Returns
     -------
@@ -197,7 +199,7 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
         client = Client(cluster)
     try:
         futs = client.map(_make, range(n_cases), seed=seed, out=str(out), scenario=str(scenario),
-                          duration_s=duration_s, rate_Hz=rate_Hz, pure=False)
+                          duration_s=duration_s, rate_Hz=rate_Hz, mix=mix, pure=False)
         recs = []
         for f in tqdm(as_completed(futs), total=n_cases, disable=not progress, file=sys.stderr, desc="cases"):
             recs.append(f.result()["record"])  # the label itself stays on disk until scoring
@@ -213,6 +215,8 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
             cluster.close()
     labels = [json.loads((out / "labels" / f"{Path(r).stem}.json").read_text()) for r in recs]
     sc = score(labels, results)
-    sc.update(seed=seed, case_duration_s=duration_s, case_rate_Hz=rate_Hz, null_runs=n_null)
+    from .cases import CaseMix
+    sc.update(seed=seed, case_duration_s=duration_s, case_rate_Hz=rate_Hz, null_runs=n_null,
+              mix=(mix or CaseMix()).as_dict())
     atomic_write_text(out / "scores.json", json.dumps(sc, indent=1, default=float) + "\n")
     return sc

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,86 @@ P_NULL, P_SINGLE = 0.20, 0.55
 #: Range of the signature SNR the case generator aims at (log-uniform), from below to well above
 #: the detection limit.
 SNR_TARGET = (1.0, 1000.0)
+
+
+class MixError(ValueError):
+    """A case mix that cannot be drawn; ``field`` names the offending choice ("effects", "kind" or "snr")."""
+
+    def __init__(self, field: str, message: str):
+        super().__init__(message)
+        self.field = field
+
+
+@dataclass(frozen=True)
+class CaseMix:
+    """What the benchmark's cases are drawn from.
+
+    The default is the issue's mix: about 20 % null, 55 % one effect, 25 % two, over the whole library,
+    SNR from below to well above the limit. A narrower mix aims the benchmark at one question (for example
+    two look-alikes, single effects, above the limit); each case is drawn as in the default mix, from the
+    narrower pool and SNR range.
+
+    Attributes
+    ----------
+    effects : tuple of str
+        The effects drawn from, in :data:`fmvmg_sim.effects.MODELS` order.
+    p_null, p_single : float
+        Fractions of null and single-effect cases; the rest have two effects.
+    snr_range : tuple of float
+        Signature SNR targets, drawn log-uniformly.
+    """
+
+    effects: tuple = tuple(MODELS)
+    p_null: float = P_NULL
+    p_single: float = P_SINGLE
+    snr_range: tuple = SNR_TARGET
+
+    #: ``--mix`` names: (p_null, p_single).
+    KINDS = {"default": (P_NULL, P_SINGLE), "single": (0.0, 1.0), "pair": (0.0, 0.0)}
+
+    @classmethod
+    def build(cls, effects: list | None = None, kind: str = "default", snr_min: float = SNR_TARGET[0],
+              snr_max: float = SNR_TARGET[1]) -> "CaseMix":
+        """A checked mix from command-line choices.
+
+        Parameters
+        ----------
+        effects : list of str, optional
+            Effect names (default: the whole library).
+        kind : {"default", "single", "pair"}, optional
+        snr_min, snr_max : float, optional
+
+        Returns
+        -------
+        CaseMix
+
+        Raises
+        ------
+        MixError
+            Naming what is wrong: an unknown effect, an unknown kind, too few effects for pairs, a bad SNR range.
+        """
+        names = list(MODELS) if not effects else list(dict.fromkeys(effects))
+        unknown = [n for n in names if n not in MODELS]
+        if unknown:
+            raise MixError("effects", f"unknown effect {', '.join(unknown)} (known: {', '.join(MODELS)})")
+        if kind not in cls.KINDS:
+            raise MixError("kind", f"unknown mix {kind!r} (known: {', '.join(cls.KINDS)})")
+        p_null, p_single = cls.KINDS[kind]
+        if p_null + p_single < 1.0 and len(names) < 2:
+            raise MixError("effects", f"mix {kind!r} has two-effect cases and needs at least two effects")
+        if not (0.0 < snr_min < snr_max and np.isfinite(snr_max)):
+            raise MixError("snr", f"SNR range [{snr_min:g}, {snr_max:g}] must satisfy 0 < min < max < inf")
+        return cls(tuple(n for n in MODELS if n in names), p_null, p_single, (float(snr_min), float(snr_max)))
+
+    def as_dict(self) -> dict:
+        """JSON-ready description (kept in ``scores.json``).
+
+        Returns
+        -------
+        dict
+        """
+        return {"effects": list(self.effects), "p_null": self.p_null, "p_single": self.p_single,
+                "snr_range": list(self.snr_range)}
 #: Parameters that are not amplitudes (time constants, widths).
 NOT_SCALED = ("tau_s", "width_K", "tau_h")
 #: Fraction of an amplitude's physical range kept clear of its non-zero bounds in the cases (20x the
@@ -141,7 +222,7 @@ def draw_effect(rng: np.random.Generator, name: str, scale: float) -> dict:
 
 
 def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: float = 3 * 3600.0,
-              output_rate_Hz: float = 1.0) -> dict:
+              output_rate_Hz: float = 1.0, mix: CaseMix | None = None) -> dict:
     """Generate case ``k``: write ``cases/case_k.csv`` and ``labels/case_k.json``.
 
     Parameters
@@ -151,6 +232,8 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     scenario_path : str
         Nominal scenario.
     duration_s, output_rate_Hz : float, optional
+    mix : CaseMix, optional
+        What the case is drawn from (default: the issue's mix).
 
     Returns
     -------
@@ -160,16 +243,17 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     from ..effects import EffectSet
     from ..envelope.engine import run_envelope
     from ..scenario import load_scenario
+    mix = mix or CaseMix()
     rng = np.random.default_rng([seed, k])
     u = rng.random()
-    names = list(MODELS)
-    if u < P_NULL:
+    names = list(mix.effects)
+    if u < mix.p_null:
         effects = []
-    elif u < P_NULL + P_SINGLE:
+    elif u < mix.p_null + mix.p_single:
         effects = [names[k % len(names)] if rng.random() < 0.5 else str(rng.choice(names))]
     else:
         effects = [str(x) for x in rng.choice(names, 2, replace=False)]
-    target = float(np.exp(rng.uniform(np.log(SNR_TARGET[0]), np.log(SNR_TARGET[1]))))
+    target = float(np.exp(rng.uniform(np.log(mix.snr_range[0]), np.log(mix.snr_range[1]))))
     drawn = {n: draw_effect(rng, n, 1.0) for n in effects}
     theta = {kn.name: float(rng.uniform(-1, 1) * kn.tolerance) for kn in NOMINAL_KNOBS}
     scn = load_scenario(scenario_path)
