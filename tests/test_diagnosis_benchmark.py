@@ -35,3 +35,16 @@ def test_bad_case_mix_is_exit_2_naming_the_option(tmp_path, capsys):
         err = capsys.readouterr().err
         assert rc == 2 and flag in err and text in err, (argv, rc, err)
         assert not out.exists()                  # nothing half-written
+
+
+def test_a_narrow_mix_reaches_the_cases_and_the_scores(tmp_path, capsys):
+    out = tmp_path / "bench"
+    rc = main(["diagnose-benchmark", "--cases", "1", "--seed", "5", "-o", str(out), "--duration-h", "1.1",
+               "--null-runs", "2", "--effects", "thermal_lag", "--mix", "single", "--snr-min", "50",
+               "--snr-max", "60", "--json", "--workers", "1"])
+    assert rc == 0
+    sc = json.loads(capsys.readouterr().out)
+    assert sc["mix"] == {"effects": ["thermal_lag"], "p_null": 0.0, "p_single": 1.0, "snr_range": [50.0, 60.0]}
+    lab = json.loads(next((out / "labels").glob("*.json")).read_text())
+    assert list(lab["effects"]) == ["thermal_lag"] and 50.0 <= lab["snr_target"] <= 60.0
+    assert sc["errors"] == 0 and sc["single_above"] == 1
