@@ -17,6 +17,7 @@ import copy
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -31,6 +32,15 @@ P_NULL, P_SINGLE = 0.20, 0.55
 #: Range of the signature SNR the case generator aims at (log-uniform), from below to well above
 #: the detection limit.
 SNR_TARGET = (1.0, 1000.0)
+#: Parameters that are not amplitudes (time constants, widths).
+NOT_SCALED = ("tau_s", "width_K", "tau_h")
+#: Fraction of an amplitude's physical range kept clear of its non-zero bounds in the cases (20x the
+#: diagnosis's pin tolerance).
+BOUND_MARGIN = 0.02
+#: Effects that change only the noise (their SNR is analytic; they set the others' noise).
+NOISE_LEVEL = ("quantization", "flicker_noise")
+#: SNR tiers of the signature left after the nominal calibration absorbs what it can.
+SNR_TIERS = ((0.0, 3.0, "below"), (3.0, 10.0, "near"), (10.0, np.inf, "above"))
 
 
 class MixError(ValueError):
@@ -66,7 +76,7 @@ class CaseMix:
     snr_range: tuple = SNR_TARGET
 
     #: ``--mix`` names: (p_null, p_single).
-    KINDS = {"default": (P_NULL, P_SINGLE), "single": (0.0, 1.0), "pair": (0.0, 0.0)}
+    KINDS: ClassVar[dict] = {"default": (P_NULL, P_SINGLE), "single": (0.0, 1.0), "pair": (0.0, 0.0)}
 
     @classmethod
     def build(cls, effects: list | None = None, kind: str = "default", snr_min: float = SNR_TARGET[0],
@@ -111,15 +121,6 @@ class CaseMix:
         """
         return {"effects": list(self.effects), "p_null": self.p_null, "p_single": self.p_single,
                 "snr_range": list(self.snr_range)}
-#: Parameters that are not amplitudes (time constants, widths).
-NOT_SCALED = ("tau_s", "width_K", "tau_h")
-#: Fraction of an amplitude's physical range kept clear of its non-zero bounds in the cases (20x the
-#: diagnosis's pin tolerance).
-BOUND_MARGIN = 0.02
-#: Effects that change only the noise (their SNR is analytic; they set the others' noise).
-NOISE_LEVEL = ("quantization", "flicker_noise")
-#: SNR tiers of the signature left after the nominal calibration absorbs what it can.
-SNR_TIERS = ((0.0, 3.0, "below"), (3.0, 10.0, "near"), (10.0, np.inf, "above"))
 
 
 def tier(snr: float) -> str:
