@@ -251,6 +251,8 @@ def test_tied_q_drift_ranks_before_a_reference_drift_without_vref():
     pairs = {f"{r}+{m}": _tie([r, m], 50.0, 40.0, fit=rect_only), f"{q}+{m}": _tie([q, m], 49.0, 41.0)}
     assert prefer_q_drift(pairs, f"{r}+{m}", 0.45) == f"{q}+{m}"
     assert prefer_q_drift(pairs, f"{q}+{m}", 0.45) == f"{q}+{m}"
+    both = {f"{q}+{r}": _tie([q, r], 50.0, 40.0, fit=rect_only)}              # a pair of the two: no swap
+    assert prefer_q_drift(both, f"{q}+{r}", 0.45) == f"{q}+{r}"
 
 
 def test_forward_selection_starts_from_the_tied_q_drift(monkeypatch):

@@ -136,7 +136,7 @@ def test_case_mix_checks_its_choices():
     m = CaseMix.build(["reference_drift", "q_factor_drift", "reference_drift"], "single", 10.0, 1000.0)
     assert m.effects == ("q_factor_drift", "reference_drift") and (m.p_null, m.p_single) == (0.0, 1.0)
     assert CaseMix.build(["duffing", "feedthrough"], "pair").p_single == 0.0
-    for args, field in [((["q_drift"],), "effects"), ((None, "triple"), "kind"), ((["duffing"], "default"), "effects"),
+    for args, field in [((["q_drift"],), "effects"), (([],), "effects"), ((None, "triple"), "kind"), ((["duffing"], "default"), "effects"),
                         ((None, "single", 0.0, 10.0), "snr"), ((None, "single", 10.0, 10.0), "snr"),
                         ((None, "single", 1.0, float("inf")), "snr")]:
         with pytest.raises(MixError) as e:

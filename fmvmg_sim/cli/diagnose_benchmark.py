@@ -60,8 +60,6 @@ def main(args) -> int:
     if not Path(scn).is_file():
         raise InputError("file not found", scn)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()] if args.effects is not None else None
-    if effects is not None and not effects:
-        raise InputError("no effect named", "--effects")
     try:
         mix = CaseMix.build(effects, args.mix, args.snr_min, args.snr_max)
     except MixError as exc:

@@ -585,8 +585,8 @@ def prefer_q_drift(evals: dict, chosen: str, vref_V: float) -> str:
     """
     ev = evals[chosen]
     parts = chosen.split("+")
-    if "reference_drift" not in parts or ev["fit"] is None:
-        return chosen
+    if "reference_drift" not in parts or "q_factor_drift" in parts or ev["fit"] is None:
+        return chosen  # nothing to swap (a pair of the two is judged by _refuse_q_and_rectifier)
     alt = "+".join(sorted("q_factor_drift" if p == "reference_drift" else p for p in parts))
     other = evals.get(alt)
     if (other is None or not other["accepted"] or other["gain"]["gain"] < ev["gain"]["ci"][0]

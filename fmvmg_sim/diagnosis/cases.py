@@ -86,7 +86,7 @@ class CaseMix:
         Parameters
         ----------
         effects : list of str, optional
-            Effect names (default: the whole library).
+            Effect names (default None: the whole library; an empty list is an error).
         kind : {"default", "single", "pair"}, optional
         snr_min, snr_max : float, optional
 
@@ -99,7 +99,9 @@ class CaseMix:
         MixError
             Naming what is wrong: an unknown effect, an unknown kind, too few effects for pairs, a bad SNR range.
         """
-        names = list(MODELS) if not effects else list(dict.fromkeys(effects))
+        if effects is not None and not effects:
+            raise MixError("effects", "no effect named")
+        names = list(MODELS) if effects is None else list(dict.fromkeys(effects))
         unknown = [n for n in names if n not in MODELS]
         if unknown:
             raise MixError("effects", f"unknown effect {', '.join(unknown)} (known: {', '.join(MODELS)})")
