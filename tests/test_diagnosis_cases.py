@@ -46,6 +46,12 @@ def test_thermal_lag_attributed_with_gaps_and_nans(tmp_path, capsys):
     assert abs(top["params"]["tau_s"] - 600.0) / 600.0 < 0.10          # stated tolerance: 10 %
     assert top["shrink"] > 0.5
     assert rep["record"]["issues"]["gaps"] and rep["record"]["issues"]["nan_samples"]["quadrature_V"] == 10
+    # the oven's last hold (50 C) lies beyond every temperature the last fold trained on; the first fold is
+    # tested on the heating ramp's lower part, inside the range it trained on (25 to -10 C)
+    folds = rep["record"]["folds"]
+    assert folds[0]["test_outside_fraction"] == 0.0 and folds[-1]["test_outside_fraction"] == 1.0
+    assert rep["record"]["heldout_outside_training_temperatures"]["heldout_outside_max_K"] > 4.0
+    assert "outside their fold's training temperatures" in (out / "report.md").read_text()
     for f in ("report.md", "residual_time.png", "residual_temperature.png", "allan.png", "gap_before_after.png"):
         assert (out / f).is_file()
     assert set(rep["localization"]) >= {"channels", "allan_bands", "regimes"}

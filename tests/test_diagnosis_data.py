@@ -84,3 +84,26 @@ def test_rate_stuck_on_one_level_takes_the_quadrature_step():
     cols["rate_V"] = 1e-3 * rng.standard_normal(n)
     cols["rate_dps"] = cols["rate_V"] / 0.01
     assert prepare(Record(cols, {}), 0.01).lattice()[CHANNELS.index("rate_V")] == 0.0
+
+
+def _temperature_record(temp_C, n=7200):
+    t = np.arange(1.0, n + 1.0)
+    cols = {"time_s": t, "temperature_C": temp_C(t), "rate_dps": np.zeros(n), "rate_true_dps": np.zeros(n)}
+    return Record(cols, {})
+
+
+def test_temperature_coverage_finds_held_out_data_beyond_the_training_range():
+    from fmvmg_sim.diagnosis.data import BLOCK_S, GAP_FRACTION, N_SEGMENTS
+    n, r = 7200, 60.0 / 7200.0                       # one ramp, 25 to 85 C
+    cov = prepare(_temperature_record(lambda t: 25.0 + r * t, n), 0.01).temperature_coverage()
+    # each held-out segment starts a gap after its training window (0.2 segment = many times the 0.5 K margin)
+    assert cov["heldout_outside_fraction"] == 1.0
+    assert all(f["test_outside_fraction"] == 1.0 for f in cov["folds"])
+    # the farthest held-out block: the segment plus its gap beyond the last training block (to a block)
+    seg = n / N_SEGMENTS
+    assert abs(cov["heldout_outside_max_K"] - r * seg * (1 + GAP_FRACTION)) < r * BLOCK_S
+    assert abs(cov["record_C"][0] - 25.0) < r * BLOCK_S and abs(cov["record_C"][1] - 85.0) < r * BLOCK_S
+    # a cycled oven: every fold trains on whole cycles and is tested inside their range
+    cyc = prepare(_temperature_record(lambda t: 25.0 + 30.0 * np.sin(2 * np.pi * t / 1200.0), n), 0.01)
+    cov = cyc.temperature_coverage()
+    assert cov["heldout_outside_fraction"] == 0.0 and cov["heldout_outside_max_K"] < 0.5

@@ -34,6 +34,8 @@ GAP_FRACTION = 0.2
 RATE_MARGIN_S = 30.0
 #: Shortest record the windows allow (s).
 MIN_DURATION_S = 3600.0
+#: Held-out temperatures farther than this outside a training window's range count as extrapolation (K).
+COVERAGE_MARGIN_K = 0.5
 #: |dT/dt| below which the oven is holding (K/min).
 HOLD_K_PER_MIN = 0.05
 #: Model-accuracy floors per block (quasi-static model against the envelope engine, see the tests).
@@ -384,6 +386,45 @@ class Prepared:
         """
         f = self.folds()
         return self.t_s >= f[0]["test_start_s"]
+
+    def temperature_coverage(self, margin_K: float = COVERAGE_MARGIN_K) -> dict:
+        """Temperatures each fold trains and is tested on, and how far its held-out segment leaves them.
+
+        A temperature law fitted on one range and scored beyond it is scored on its extrapolation as
+        much as on the effect: the report says where that happens.
+
+        Parameters
+        ----------
+        margin_K : float, optional
+            Held-out blocks more than this outside their fold's training range count as outside it.
+
+        Returns
+        -------
+        dict
+            ``record_C`` ([min, max] of the block-mean sensor temperature), ``heldout_outside_fraction``
+            and ``heldout_outside_max_K`` (held-out blocks outside the training range of their fold),
+            ``margin_K``, and ``folds``: per fold ``train_C``, ``test_C``, ``test_outside_fraction`` and
+            ``test_outside_max_K``.
+        """
+        T = self.block_mean(self.case_C)
+        ok = np.isfinite(T)
+
+        def span(m):
+            v = T[m & ok]
+            return [float(v.min()), float(v.max())] if v.size else None
+
+        per_fold, excess = [], []
+        for fd in self.folds():
+            tr, v = span(fd["train"]), T[fd["test"] & ok]
+            ex = np.maximum(np.maximum(tr[0] - v, v - tr[1]), 0.0) if tr is not None else np.zeros(0)
+            excess.append(ex)
+            per_fold.append({"train_C": tr, "test_C": span(fd["test"]),
+                             "test_outside_fraction": float(np.mean(ex > margin_K)) if ex.size else 0.0,
+                             "test_outside_max_K": float(ex.max()) if ex.size else 0.0})
+        ex = np.concatenate(excess)
+        return {"record_C": span(np.ones(self.n_blocks, bool)), "margin_K": float(margin_K),
+                "heldout_outside_fraction": float(np.mean(ex > margin_K)) if ex.size else 0.0,
+                "heldout_outside_max_K": float(ex.max()) if ex.size else 0.0, "folds": per_fold}
 
 
 def prepare(record: Record, sf_nominal_V_per_dps: float, block_s: float = BLOCK_S) -> Prepared:

@@ -18,7 +18,7 @@ from ..errors import InputError
 from ..record import Record, read_record
 from ..scenario import Scenario, load_scenario
 from . import localize as loc
-from .attribute import Scorer, ambiguity, attribute, rejudge_second, separating_experiment
+from .attribute import MIN_TRAIN_SPAN_K, Scorer, ambiguity, attribute, rejudge_second, separating_experiment
 from .calibrate import calibrate
 from .data import Prepared, prepare
 from .fitting import Fitter
@@ -415,6 +415,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
             r["why_not"] = [f"look-alike of {lookalike_of[r['effect']]}: explains the same gap (see the ambiguity)"]
         elif not r.get("why_not"):
             r["why_not"] = ["passes alone; another effect explains the gap better"]
+    cover = prep.temperature_coverage()
     report = {
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
@@ -423,12 +424,15 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,
                    "sample_interval_s": prep.sample_interval_s, "channels": list(prep.channels),
                    "issues": prep.issues,
+                   "temperature_C": cover["record_C"],
+                   "heldout_outside_training_temperatures": {k: cover[k] for k in (
+                       "heldout_outside_fraction", "heldout_outside_max_K", "margin_K")},
                    "folds": [{"test_start_s": f["test_start_s"], "test_end_s": f["test_end_s"],
-                              "train_blocks": int(f["train"].sum()), "test_blocks": int(f["test"].sum())}
-                             for f in folds]},
+                              "train_blocks": int(f["train"].sum()), "test_blocks": int(f["test"].sum()), **c}
+                             for f, c in zip(folds, cover["folds"])]},
         "settings": {"null_runs": n_null, "seed": seed, "block_s": float(np.median(np.diff(prep.block_time_s()))),
                      "delta_bic_max": -10.0, "alpha_holm": loc.ALPHA,
-                     "folds_not_scored": scorer.dropped_folds},
+                     "folds_not_scored": scorer.dropped_folds, "min_train_span_K": MIN_TRAIN_SPAN_K},
         "wall_time_s": time.perf_counter() - wall0,
     }
     report["_debug"] = {"single": {n: {"gain": ev["gain"].get("by_channel"), "dbic": ev["delta_bic"],

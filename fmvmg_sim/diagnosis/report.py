@@ -67,6 +67,7 @@ def markdown(rep: dict) -> str:
     r = rep["record"]
     L += ["## Record", "", f"{r['samples']} samples, {r['duration_s'] / 3600:.2f} h at {r['sample_interval_s']:.3g} s; "
           f"channels: {', '.join(r['channels'])}.", ""]
+    L += _coverage_lines(r, rep.get("settings", {}))
     iss = r["issues"]
     if iss.get("gaps") or iss.get("nan_samples"):
         L.append(f"Gaps: {len(iss.get('gaps', []))} ({iss.get('gap_total_s', 0):.0f} s missing); "
@@ -105,6 +106,30 @@ def markdown(rep: dict) -> str:
     L += ["", "Gaps are the excess RMS over the null's noise, sqrt(max(0, MSE - noise)); shrink = 1 - G_after/G_before "
           "on the mean-square excess.", ""]
     return "\n".join(L)
+
+
+def _coverage_lines(r: dict, settings: dict) -> list[str]:
+    """The folds' training and held-out temperatures, and where the held-out data extrapolate."""
+    folds = r.get("folds") or []
+    if not folds or "train_C" not in folds[0]:
+        return []
+    not_scored, span_K = settings.get("folds_not_scored") or [], settings.get("min_train_span_K", 5.0)
+    rng = lambda v: f"{v[0]:.1f} to {v[1]:.1f} C" if v else "-"  # noqa: E731
+    L = ["| fold | trained on | tested on | held-out blocks outside the training range |", "|---|---|---|---|"]
+    for k, f in enumerate(folds):
+        note = f" (not scored: its training window spans under {span_K:g} K)" if k in not_scored else ""
+        L.append(f"| {k + 1} | {f['train_blocks']} blocks, {rng(f['train_C'])} | {f['test_blocks']} blocks, "
+                 f"{rng(f['test_C'])} | {100 * f['test_outside_fraction']:.0f} %{note} |")
+    o = r.get("heldout_outside_training_temperatures") or {}
+    if o.get("heldout_outside_fraction", 0.0) > 0:
+        L += ["", f"{100 * o['heldout_outside_fraction']:.0f} % of the held-out blocks lie outside their fold's "
+              f"training temperatures (by up to {o['heldout_outside_max_K']:.1f} K): there a fitted temperature law "
+              "extrapolates, and its held-out gain tests the extrapolation as well as the effect."]
+    if all(f["train_C"] is None or f["train_C"][1] - f["train_C"][0] < span_K for f in folds):
+        L += ["", f"No fold's training window spans {span_K:g} K: a temperature effect cannot be fitted on this "
+              f"record. Change the temperature by at least {span_K:g} K well before {folds[0]['test_start_s']:.0f} s, "
+              "where the held-out blocks begin."]
+    return L + [""]
 
 
 def write_report(rep: dict, out: Path) -> dict:
