@@ -126,7 +126,7 @@ def _coverage_lines(r: dict, settings: dict) -> list[str]:
               f"training temperatures (by up to {o['heldout_outside_max_K']:.1f} K): there a fitted temperature law "
               "extrapolates, and its held-out gain tests the extrapolation as well as the effect."]
     if all(f["train_C"] is None or f["train_C"][1] - f["train_C"][0] < span_K for f in folds):
-        L += ["", f"No fold's training window spans {span_K:g} K: a temperature effect cannot be fitted on this "
+        L += ["", f"No fold's training window spans {span_K:g} K: no temperature effect can be identified on this "
               f"record. Change the temperature by at least {span_K:g} K well before {folds[0]['test_start_s']:.0f} s, "
               "where the held-out blocks begin."]
     return L + [""]
