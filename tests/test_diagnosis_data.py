@@ -107,3 +107,26 @@ def test_temperature_coverage_finds_held_out_data_beyond_the_training_range():
     cyc = prepare(_temperature_record(lambda t: 25.0 + 30.0 * np.sin(2 * np.pi * t / 1200.0), n), 0.01)
     cov = cyc.temperature_coverage()
     assert cov["heldout_outside_fraction"] == 0.0 and cov["heldout_outside_max_K"] < 0.5
+
+
+def test_folds_are_forward_chained_with_a_gap():
+    from fmvmg_sim.diagnosis.data import BLOCK_S, GAP_FRACTION, N_FOLDS, N_SEGMENTS
+    n = 7200
+    prep = prepare(_record(n=n), 0.01)
+    folds = prep.folds()
+    tb = prep.block_time_s()
+    seg = n / N_SEGMENTS
+    assert len(folds) == N_FOLDS
+    for k, f in enumerate(folds):
+        # training ends a gap before the held-out segment: nothing random, nothing after it
+        assert tb[f["train"]].max() < f["test_start_s"] - GAP_FRACTION * seg
+        assert tb[f["test"]].min() >= f["test_start_s"] and tb[f["test"]].max() <= f["test_end_s"]
+        assert not (f["train"] & f["test"]).any()
+        if k:  # the window expands and the held-out segments tile the end of the record
+            assert f["train"].sum() > folds[k - 1]["train"].sum()
+            assert f["test_start_s"] == folds[k - 1]["test_end_s"]
+    assert abs(folds[-1]["test_end_s"] - n) < 1e-6
+    assert abs(folds[0]["test_start_s"] - n * (N_SEGMENTS - N_FOLDS) / N_SEGMENTS) < 1e-6
+    # the first fold trains on what precedes its segment and gap: 1.8 of 5 segments
+    first = (N_SEGMENTS - N_FOLDS - GAP_FRACTION) / N_SEGMENTS
+    assert abs(folds[0]["train"].mean() - first) < BLOCK_S / n
