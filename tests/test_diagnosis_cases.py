@@ -75,13 +75,15 @@ def test_two_effects(tmp_path):
 
 
 @pytest.mark.slow
-def test_out_of_library_gap_is_unexplained(tmp_path):
+@pytest.mark.parametrize("wander_amp_dps", [0.05, 0.10])
+def test_out_of_library_gap_is_unexplained(tmp_path, wander_amp_dps):
     # a bias wander no library effect makes (a 50 min sine in time, unrelated to temperature): the
-    # diagnosis must not force a library effect onto it, and must say where the gap lies
+    # diagnosis must not force a library effect onto it, and must say where the gap lies. The stronger
+    # one lifts the flicker band as much as flicker would; its excess rises as tau^2, so it is no flicker
     rec, _ = oven_record(tmp_path, "ool", seed=15, theta=THETA)
     r = read_record(rec)
     cols = {k: v.copy() for k, v in r.columns.items()}
-    wander_dps = 0.05 * np.sin(2 * np.pi * cols["time_s"] / 3000.0)
+    wander_dps = wander_amp_dps * np.sin(2 * np.pi * cols["time_s"] / 3000.0)
     sf = np.nanmedian(cols["rate_V"] / np.where(cols["rate_dps"] != 0, cols["rate_dps"], np.nan))
     cols["rate_dps"] = cols["rate_dps"] + wander_dps
     cols["rate_V"] = cols["rate_V"] + wander_dps * sf
@@ -92,6 +94,9 @@ def test_out_of_library_gap_is_unexplained(tmp_path):
     assert rep["accepted"] == []
     groups = {s["group"] for s in rep["remainder"]["significant"]}
     assert groups & {"allan_bands", "regimes"}
+    if wander_amp_dps > 0.05:
+        flicker = next(r for r in rep["ranked"] if r["effect"] == "flicker_noise")
+        assert flicker["detail"]["z_heldout"] > 3 and "tau^2" in flicker["why_not"][0], flicker
 
 
 def test_signature_snr_counts_the_records_slow_noise(tmp_path):

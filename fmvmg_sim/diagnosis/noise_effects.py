@@ -20,6 +20,10 @@ from .forward import IRATE
 #: Excess flicker accepted when the held-out and training z-scores exceed these.
 FLICKER_Z_HELDOUT = 3.0
 FLICKER_Z_TRAIN = 2.0
+#: A band excess whose tau^2 part stands this many standard errors above zero, and more than
+#: :data:`WANDER_RISE_OVER_FLAT` times as many as its flat part, is a slow wander, not flicker (:func:`band_shape`).
+WANDER_Z_RISE = 3.0
+WANDER_RISE_OVER_FLAT = 2.0
 _FLICKER = (10.0, 300.0)
 
 
@@ -75,6 +79,44 @@ def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=
     edf = np.maximum(span / taus[m] - 1.0, 1.0)
     sd = float(max(ref.std(ddof=1), np.sqrt(np.mean(2.0 / edf)) * ref.mean(), 0.05 * ref.mean()))
     return ex, ex / (sd * np.sqrt(1 + 1 / len(ref)))
+
+
+def band_shape(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=_FLICKER,
+               span_s: float | None = None) -> tuple[float, float]:
+    """Split a band's excess Allan variance into a flat (flicker) part and a part rising as tau^2.
+
+    Flicker leaves an excess Allan variance that is flat in tau. A slow deterministic wander (a bias
+    that moves over tens of minutes) leaves one that rises as tau^2 for tau well below its period, and
+    it can lift the band's mean as much as flicker does. The excess at each tau is fitted as
+    ``a + b (tau / tau_max)^2`` by weighted least squares, each point weighted by the null's spread there
+    (floored as in :func:`band_excess`).
+
+    Parameters
+    ----------
+    taus, adev_meas : ndarray
+    adev_nulls : list of ndarray
+    band : tuple, optional
+    span_s : float, optional
+        Length of the data behind the curves (s).
+
+    Returns
+    -------
+    z_flat, z_rise : float
+        ``a`` and ``b`` over their standard errors; 0 with fewer than three taus or two nulls.
+    """
+    m = (taus >= band[0]) & (taus <= band[1]) & np.isfinite(adev_meas)
+    N = np.array([a[m] ** 2 for a in adev_nulls if len(a) == len(taus)]) if adev_nulls else np.zeros((0, 0))
+    if m.sum() < 3 or len(N) < 2:
+        return 0.0, 0.0
+    ref = N.mean(axis=0)
+    e = adev_meas[m] ** 2 - ref
+    span = span_s if span_s is not None else float(taus[-1]) * 10.0
+    edf = np.maximum(span / taus[m] - 1.0, 1.0)
+    sd = np.maximum.reduce([N.std(axis=0, ddof=1), np.sqrt(2.0 / edf) * ref, 0.05 * ref]) * np.sqrt(1 + 1 / len(N))
+    A = np.column_stack([np.ones(m.sum()), (taus[m] / taus[m].max()) ** 2]) / sd[:, None]
+    coef, *_ = np.linalg.lstsq(A, e / sd, rcond=None)
+    se = np.sqrt(np.diag(np.linalg.pinv(A.T @ A)))
+    return float(coef[0] / se[0]), float(coef[1] / se[1])
 
 
 def flicker_level(excess_var_dps2: float) -> float:
