@@ -340,8 +340,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                               span_s=(~ho_s & quiet).sum() * dt)
     # a slow bias wander lifts the band too, but its excess rises as tau^2 where flicker's is flat
     z_flat, z_rise = band_shape(meas_ho_allan[0], meas_ho_allan[1], null_ho_allan, span_s=(ho_s & quiet).sum() * dt)
-    wander = bool(z_rise > WANDER_Z_RISE and z_rise > WANDER_RISE_OVER_FLAT * z_flat)
-    flick_ok = bool(z_ho > FLICKER_Z_HELDOUT and z_tr > FLICKER_Z_TRAIN and not q and not wander)
+    band_up = bool(z_ho > FLICKER_Z_HELDOUT and z_tr > FLICKER_Z_TRAIN)
+    wander = bool(band_up and z_rise > WANDER_Z_RISE and z_rise > WANDER_RISE_OVER_FLAT * z_flat)
+    flick_ok = bool(band_up and not q and not wander)
     if flick_ok and len(att["selected"]) == 2:
         # more slow noise in the rate output than the null's noise model holds: a smooth second effect (a
         # temperature-rate term) may have been credited for following the wander; judge it again with the
