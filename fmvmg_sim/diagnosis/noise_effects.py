@@ -46,6 +46,20 @@ def quantization_candidate(prep: Prepared, nominal_lsb_V: float) -> dict | None:
     return None
 
 
+def _band(taus, adev_meas, adev_nulls, band, span_s):
+    """The band's taus (mask), the nulls' Allan variances there, and the relative sampling variance per tau.
+
+    A few null replicates underestimate the spread where there are few averages: the callers floor it at
+    the sampling spread of an Allan variance, ``sqrt(2 / EDF)`` relative, ``EDF ~ span / tau`` (``span``
+    defaults to ten times the longest tau)."""
+    m = (taus >= band[0]) & (taus <= band[1]) & np.isfinite(adev_meas)
+    N = np.array([a[m] ** 2 for a in adev_nulls or [] if len(a) == len(taus)], dtype=float)
+    if not m.any():
+        return m, N, np.zeros(0)
+    span = span_s if span_s is not None else float(taus[-1]) * 10.0
+    return m, N, 2.0 / np.maximum(span / taus[m] - 1.0, 1.0)
+
+
 def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=_FLICKER,
                 span_s: float | None = None) -> tuple[float, float]:
     """Mean excess Allan variance in a band and its z-score against the null spread.
@@ -64,20 +78,13 @@ def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=
         (deg/s)^2.
     z : float
     """
-    m = (taus >= band[0]) & (taus <= band[1]) & np.isfinite(adev_meas)
-    if not m.any() or not adev_nulls:
-        return 0.0, 0.0
-    N = np.array([a[m] ** 2 for a in adev_nulls if len(a) == len(taus)])
-    if len(N) < 2:
+    m, N, rel_var = _band(taus, adev_meas, adev_nulls, band, span_s)
+    if not m.any() or len(N) < 2:
         return 0.0, 0.0
     meas = np.mean(adev_meas[m] ** 2)
     ref = N.mean(axis=1)
     ex = float(meas - ref.mean())
-    # a few null replicates underestimate the spread where there are few averages: floor it at the
-    # sampling spread of an Allan variance, sqrt(2 / EDF) relative, EDF ~ span / tau
-    span = span_s if span_s is not None else float(taus[-1]) * 10.0
-    edf = np.maximum(span / taus[m] - 1.0, 1.0)
-    sd = float(max(ref.std(ddof=1), np.sqrt(np.mean(2.0 / edf)) * ref.mean(), 0.05 * ref.mean()))
+    sd = float(max(ref.std(ddof=1), np.sqrt(np.mean(rel_var)) * ref.mean(), 0.05 * ref.mean()))
     return ex, ex / (sd * np.sqrt(1 + 1 / len(ref)))
 
 
@@ -104,15 +111,12 @@ def band_shape(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=_
     z_flat, z_rise : float
         ``a`` and ``b`` over their standard errors; 0 with fewer than three taus or two nulls.
     """
-    m = (taus >= band[0]) & (taus <= band[1]) & np.isfinite(adev_meas)
-    N = np.array([a[m] ** 2 for a in adev_nulls if len(a) == len(taus)]) if adev_nulls else np.zeros((0, 0))
+    m, N, rel_var = _band(taus, adev_meas, adev_nulls, band, span_s)
     if m.sum() < 3 or len(N) < 2:
         return 0.0, 0.0
     ref = N.mean(axis=0)
     e = adev_meas[m] ** 2 - ref
-    span = span_s if span_s is not None else float(taus[-1]) * 10.0
-    edf = np.maximum(span / taus[m] - 1.0, 1.0)
-    sd = np.maximum.reduce([N.std(axis=0, ddof=1), np.sqrt(2.0 / edf) * ref, 0.05 * ref]) * np.sqrt(1 + 1 / len(N))
+    sd = np.maximum.reduce([N.std(axis=0, ddof=1), np.sqrt(rel_var) * ref, 0.05 * ref]) * np.sqrt(1 + 1 / len(N))
     A = np.column_stack([np.ones(m.sum()), (taus[m] / taus[m].max()) ** 2]) / sd[:, None]
     coef, *_ = np.linalg.lstsq(A, e / sd, rcond=None)
     se = np.sqrt(np.diag(np.linalg.pinv(A.T @ A)))
