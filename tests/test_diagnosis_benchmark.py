@@ -29,7 +29,8 @@ def test_bad_case_mix_is_exit_2_naming_the_option(tmp_path, capsys):
     for argv, flag, text in [(["--effects", "q_factor_drift,nope"], "--effects", "unknown effect nope"),
                              (["--effects", ",", "--mix", "single"], "--effects", "no effect named"),
                              (["--effects", "duffing", "--mix", "pair"], "--effects", "at least two effects"),
-                             (["--snr-min", "50", "--snr-max", "20"], "--snr-min/--snr-max", "0 < min < max")]:
+                             (["--snr-min", "50", "--snr-max", "20"], "--snr-min/--snr-max", "0 < min < max"),
+                             (["--ool-fraction", "1.5"], "--ool-fraction", "must lie in [0, 1)")]:
         out = tmp_path / "never"
         rc = main(["diagnose-benchmark", "--cases", "2", "-o", str(out)] + argv)
         err = capsys.readouterr().err
@@ -44,7 +45,33 @@ def test_a_narrow_mix_reaches_the_cases_and_the_scores(tmp_path, capsys):
                "--snr-max", "60", "--json", "--workers", "1"])
     assert rc == 0
     sc = json.loads(capsys.readouterr().out)
-    assert sc["mix"] == {"effects": ["thermal_lag"], "p_null": 0.0, "p_single": 1.0, "snr_range": [50.0, 60.0]}
+    assert sc["mix"] == {"effects": ["thermal_lag"], "p_null": 0.0, "p_single": 1.0, "snr_range": [50.0, 60.0],
+                         "p_ool": 0.0}
+    assert "ool_cases" not in sc                 # the mix has no out-of-library case
     lab = json.loads(next((out / "labels").glob("*.json")).read_text())
     assert list(lab["effects"]) == ["thermal_lag"] and 50.0 <= lab["snr_target"] <= 60.0
     assert sc["errors"] == 0 and sc["single_above"] == 1
+
+
+def test_out_of_library_cases_are_scored_apart_from_nulls():
+    # an out-of-library case has no library effect but is no null case: the right verdict is "unexplained",
+    # a claimed library effect is a mis-attribution, and neither touches the false-alarm rate
+    from fmvmg_sim.diagnosis.benchmark import score
+
+    def res(verdict, accepted=()):
+        return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted), "ambiguous_with": {},
+                "rows": {a: {"shrink": 0.5, "params": {}} for a in accepted}}
+    labs = [{"case": 0, "effects": {}, "tier": "null", "snr": 0.0},
+            {"case": 1, "effects": {}, "tier": "above", "snr": 40.0, "out_of_library": {"kind": "bias_wander"}},
+            {"case": 2, "effects": {}, "tier": "above", "snr": 90.0, "out_of_library": {"kind": "bias_step"}},
+            {"case": 3, "effects": {}, "tier": "below", "snr": 2.0, "out_of_library": {"kind": "bias_step"}}]
+    results = [res("none"), res("unexplained"), res("explained", ["temperature_rate"]), res("none")]
+    sc = score(labs, results)
+    assert sc["null_cases"] == 1 and sc["false_alarm_rate"] == 0.0
+    assert sc["ool_cases"] == 3 and sc["ool_cases_above"] == 2
+    assert sc["ool_unexplained_rate"] == 1 / 3 and sc["ool_unexplained_rate_above"] == 0.5
+    assert sc["ool_attributed_rate"] == 1 / 3 and sc["ool_attributed_rate_above"] == 0.5
+    assert sc["ool_none_rate"] == 1 / 3 and sc["ool_none_rate_above"] == 0.0
+    assert [r.get("out_of_library") for r in sc["rows"]] == [None, "bias_wander", "bias_step", "bias_step"]
+    assert sc["median_shrink"] is None           # no true effect was attributed
+    assert "ool_cases" not in score(labs[:1], results[:1])

@@ -167,3 +167,64 @@ def test_a_narrow_mix_draws_single_effects_from_its_pool(tmp_path):
     a = make_case(5, 4242, tmp_path / "a", str(NOMINAL), duration_s=1.1 * 3600.0)
     b = make_case(5, 4242, tmp_path / "b", str(NOMINAL), duration_s=1.1 * 3600.0, mix=CaseMix())
     assert {k: v for k, v in a.items() if k != "record"} == {k: v for k, v in b.items() if k != "record"}
+
+
+def test_out_of_library_disturbances(tmp_path):
+    # a unit sine in time, and a step from 0 to 1 that is half-way at its time and done within its rise
+    from fmvmg_sim.diagnosis.cases import OUT_OF_LIBRARY, out_of_library_shape
+    t = np.arange(0.0, 10800.0)
+    w = out_of_library_shape({"kind": "bias_wander", "period_s": 3000.0, "phase_rad": 0.0}, t)
+    assert abs(w[750] - 1.0) < 1e-12 and abs(w[1500]) < 1e-12 and abs(w[2250] + 1.0) < 1e-12
+    st = out_of_library_shape({"kind": "bias_step", "t_step_s": 5000.0, "rise_s": 60.0}, t)
+    assert st[5000] == 0.5 and st[4850] < 1e-3 and st[5150] > 1.0 - 1e-3 and np.all(np.diff(st) >= 0)
+    with pytest.raises(ValueError, match="bias_wander"):
+        out_of_library_shape({"kind": "sine"}, t)
+    assert OUT_OF_LIBRARY == ("bias_wander", "bias_step")
+
+
+def test_out_of_library_case_reaches_its_snr_on_the_lattice(tmp_path):
+    # added before the converter (the output stays on its lattice), in deg/s as drawn, at the SNR aimed at
+    from fmvmg_sim.averaged import scale_factor_V_per_dps
+    from fmvmg_sim.diagnosis.cases import add_out_of_library, out_of_library_shape
+    from fmvmg_sim.diagram import build_diagram
+    from fmvmg_sim.scenario import load_scenario
+    rec, _ = oven_record(tmp_path, "ool_case", seed=16, theta=THETA)
+    before = read_record(rec)
+    dev = load_scenario(NOMINAL).device_nominal
+    sf = scale_factor_V_per_dps(build_diagram(dev, dev.reference_temperature_C))
+    lsb = dev.values["noise"]["quantization_lsb_V"]
+    ool = {"kind": "bias_wander", "period_s": 2400.0, "phase_rad": 0.3}
+    got = add_out_of_library(rec, ool, 40.0, dev, [(0.0, 1.0, 1.0)] * 5)
+    after = read_record(rec)
+    assert got["kind"] == "bias_wander" and abs(got["snr"] / 40.0 - 1.0) < 1e-9
+    assert 0.0 < got["amplitude_dps"] < 2.0
+    k = after.columns["rate_V"] / lsb
+    assert np.nanmax(np.abs(k - np.round(k))) < 1e-6                    # on the converter's lattice
+    added = after.columns["rate_V"] - before.columns["rate_V"]
+    want = got["amplitude_dps"] * out_of_library_shape(ool, before.columns["time_s"]) * sf
+    assert np.nanmax(np.abs(added - want)) <= lsb * (1 + 1e-6)           # within one converter step
+    assert np.allclose(after.columns["rate_dps"] * sf, after.columns["rate_V"], rtol=1e-6, atol=1e-12)
+    # twice the SNR needs twice the amplitude (the SNR is linear in it)
+    rec2, _ = oven_record(tmp_path, "ool_case2", seed=16, theta=THETA)
+    got2 = add_out_of_library(rec2, ool, 80.0, dev, [(0.0, 1.0, 1.0)] * 5)
+    assert abs(got2["amplitude_dps"] / got["amplitude_dps"] - 2.0) < 1e-9
+
+
+def test_out_of_library_fraction_leaves_the_other_cases_alone(tmp_path):
+    from fmvmg_sim.diagnosis.cases import CaseMix, MixError, make_case
+    for f in (-0.1, 1.0, float("nan")):
+        with pytest.raises(MixError) as e:
+            CaseMix.build(ool_fraction=f)
+        assert e.value.field == "ool"
+    mix = CaseMix.build(ool_fraction=0.5)
+    # which cases of seed 4242 are out of library is decided by their own random stream
+    is_ool = [np.random.default_rng([4242, k, 1]).random() < 0.5 for k in range(8)]
+    k_in, k_out = is_ool.index(False), is_ool.index(True)
+    a = make_case(k_in, 4242, tmp_path / "a", str(NOMINAL), duration_s=1.1 * 3600.0)
+    b = make_case(k_in, 4242, tmp_path / "b", str(NOMINAL), duration_s=1.1 * 3600.0, mix=mix)
+    assert {k: v for k, v in a.items() if k != "record"} == {k: v for k, v in b.items() if k != "record"}
+    o = make_case(k_out, 4242, tmp_path / "o", str(NOMINAL), duration_s=1.1 * 3600.0, mix=mix)
+    assert o["effects"] == {} and o["out_of_library"]["kind"] in ("bias_wander", "bias_step")
+    assert abs(o["snr"] / o["snr_target"] - 1.0) < 1e-9 or o["out_of_library"]["amplitude_dps"] == 2.0
+    from fmvmg_sim.diagnosis.cases import tier
+    assert o["tier"] == tier(o["snr"]) and "noise_model" in o

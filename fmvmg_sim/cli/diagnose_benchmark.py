@@ -34,6 +34,9 @@ def register(sub) -> None:
                         "pair: two effects each")
     p.add_argument("--snr-min", type=float, default=1.0, help="least signature SNR target (default 1)")
     p.add_argument("--snr-max", type=float, default=1000.0, help="largest signature SNR target (default 1000)")
+    p.add_argument("--ool-fraction", type=float, default=0.0, metavar="F",
+                   help="fraction of out-of-library cases (a bias wander or step no library effect makes; the "
+                        "right verdict is 'unexplained'); default 0, the issue's mix")
     p.add_argument("--json", action="store_true", help="print the scores as one JSON object on stdout")
     p.set_defaults(func=main)
 
@@ -61,9 +64,10 @@ def main(args) -> int:
         raise InputError("file not found", scn)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()] if args.effects is not None else None
     try:
-        mix = CaseMix.build(effects, args.mix, args.snr_min, args.snr_max)
+        mix = CaseMix.build(effects, args.mix, args.snr_min, args.snr_max, args.ool_fraction)
     except MixError as exc:
-        flag = {"effects": "--effects", "kind": "--mix", "snr": "--snr-min/--snr-max"}[exc.field]
+        flag = {"effects": "--effects", "kind": "--mix", "snr": "--snr-min/--snr-max",
+                "ool": "--ool-fraction"}[exc.field]
         raise InputError(str(exc), flag) from None
     sc = run_benchmark(args.cases, args.seed, Path(args.out), scn, args.scheduler, args.duration_h * 3600.0,
                        args.rate_hz, args.null_runs, args.workers, progress=True, mix=mix)

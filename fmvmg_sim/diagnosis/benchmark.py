@@ -13,7 +13,11 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
 * ``param_rel_error_median``: relative error of the recovered parameters when right
   (:func:`param_errors`);
 * every rate also by SNR tier, and (``white_noise_tiers``) with the tiers of the former SNR definition
-  that counted white block noise only.
+  that counted white block noise only;
+* out-of-library cases (only with ``--ool-fraction``; they count neither as null nor as effect cases):
+  ``ool_unexplained_rate`` (verdict "unexplained", the right answer), ``ool_attributed_rate`` (a library
+  effect claimed), ``ool_none_rate`` (verdict "none"), each over all of them and (``_above``) over those
+  above the detection limit.
 """
 
 from __future__ import annotations
@@ -107,7 +111,12 @@ def score(labels: list[dict], results: list[dict]) -> dict:
         r = {"case": lab["case"], "truth": truth, "tier": lab["tier"], "tier_white": lab.get("tier_white", lab["tier"]),
              "snr": lab["snr"], "error": res.get("error"),
              "verdict": None if err else res["verdict"], "accepted": acc}
-        if not truth:
+        if lab.get("out_of_library"):
+            r["out_of_library"] = lab["out_of_library"]["kind"]
+            r["ool_unexplained"] = bool(not err and res["verdict"] == "unexplained")
+            r["ool_attributed"] = bool(acc)
+            r["ool_none"] = bool(not err and res["verdict"] == "none")
+        elif not truth:
             r["false_alarm"] = bool(claimed)
         elif len(truth) == 1:
             t = truth[0]
@@ -144,6 +153,13 @@ def score(labels: list[dict], results: list[dict]) -> dict:
     out["median_shrink"] = float(np.median(sh)) if sh else None
     pe = [r["param_rel_error"] for r in rows if r.get("param_rel_error") is not None]
     out["param_rel_error_median"] = float(np.median(pe)) if pe else None
+    ool = [r for r in rows if "out_of_library" in r]
+    if ool:
+        out["ool_cases"] = len(ool)
+        out["ool_cases_above"] = sum(r["tier"] == "above" for r in ool)
+        for key in ("ool_unexplained", "ool_attributed", "ool_none"):
+            out[f"{key}_rate"] = rate(key, lambda r: True)[0]
+            out[f"{key}_rate_above"] = rate(key, lambda r: r["tier"] == "above")[0]
     out["by_tier"] = {}
     for t in ("below", "near", "above"):
         out["by_tier"][t] = {"single_cases": rate("top1", lambda r: r["tier"] == t)[1],

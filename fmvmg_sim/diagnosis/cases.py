@@ -9,6 +9,10 @@ with the envelope engine and a fresh noise seed on a random temperature profile 
 at random temperatures and rates, sometimes rate-table steps). Records go to
 ``cases/``; labels (effects, parameters, perturbations, seed, SNR) to ``labels/`` - a separate file
 the diagnoser is never given.
+
+Out-of-library cases (off by default: :attr:`CaseMix.p_ool`) carry no library effect but a disturbance
+no library effect makes (:data:`OUT_OF_LIBRARY`), added to the rate output; the right verdict there is
+"unexplained" (diagnosis methods section 3).
 """
 
 from __future__ import annotations
@@ -41,6 +45,13 @@ BOUND_MARGIN = 0.02
 NOISE_LEVEL = ("quantization", "flicker_noise")
 #: SNR tiers of the signature left after the nominal calibration absorbs what it can.
 SNR_TIERS = ((0.0, 3.0, "below"), (3.0, 10.0, "near"), (10.0, np.inf, "above"))
+#: Disturbances of the rate output that no library effect makes (diagnosis methods section 3 names a
+#: sinusoidal electronics disturbance and a step): a bias wander that is a sine in time (period 20-80 min,
+#: unrelated to temperature) and a bias step at a random time in the middle of the record (a charge or
+#: shock event), rounded over 60 s.
+OUT_OF_LIBRARY = ("bias_wander", "bias_step")
+#: Largest out-of-library amplitude (deg/s) a case may reach while aiming at its SNR.
+OOL_MAX_DPS = 2.0
 
 
 class MixError(ValueError):
@@ -68,19 +79,24 @@ class CaseMix:
         Fractions of null and single-effect cases; the rest have two effects.
     snr_range : tuple of float
         Signature SNR targets, drawn log-uniformly.
+    p_ool : float
+        Fraction of cases that are out of library (their drawn library effects replaced by a disturbance of
+        :data:`OUT_OF_LIBRARY`); 0 by default, the issue's mix. It is drawn from its own random stream, so the
+        other cases of a seed are the same whatever ``p_ool`` is.
     """
 
     effects: tuple = tuple(MODELS)
     p_null: float = P_NULL
     p_single: float = P_SINGLE
     snr_range: tuple = SNR_TARGET
+    p_ool: float = 0.0
 
     #: ``--mix`` names: (p_null, p_single).
     KINDS: ClassVar[dict] = {"default": (P_NULL, P_SINGLE), "single": (0.0, 1.0), "pair": (0.0, 0.0)}
 
     @classmethod
     def build(cls, effects: list | None = None, kind: str = "default", snr_min: float = SNR_TARGET[0],
-              snr_max: float = SNR_TARGET[1]) -> "CaseMix":
+              snr_max: float = SNR_TARGET[1], ool_fraction: float = 0.0) -> "CaseMix":
         """A checked mix from command-line choices.
 
         Parameters
@@ -89,6 +105,8 @@ class CaseMix:
             Effect names (default None: the whole library; an empty list is an error).
         kind : {"default", "single", "pair"}, optional
         snr_min, snr_max : float, optional
+        ool_fraction : float, optional
+            Fraction of out-of-library cases, in [0, 1).
 
         Returns
         -------
@@ -97,7 +115,8 @@ class CaseMix:
         Raises
         ------
         MixError
-            Naming what is wrong: an unknown effect, an unknown kind, too few effects for pairs, a bad SNR range.
+            Naming what is wrong: an unknown effect, an unknown kind, too few effects for pairs, a bad SNR range
+            or out-of-library fraction.
         """
         if effects is not None and not effects:
             raise MixError("effects", "no effect named")
@@ -112,7 +131,10 @@ class CaseMix:
             raise MixError("effects", f"mix {kind!r} has two-effect cases and needs at least two effects")
         if not (0.0 < snr_min < snr_max and np.isfinite(snr_max)):
             raise MixError("snr", f"SNR range [{snr_min:g}, {snr_max:g}] must satisfy 0 < min < max < inf")
-        return cls(tuple(n for n in MODELS if n in names), p_null, p_single, (float(snr_min), float(snr_max)))
+        if not 0.0 <= ool_fraction < 1.0:
+            raise MixError("ool", f"out-of-library fraction {ool_fraction:g} must lie in [0, 1)")
+        return cls(tuple(n for n in MODELS if n in names), p_null, p_single, (float(snr_min), float(snr_max)),
+                   float(ool_fraction))
 
     def as_dict(self) -> dict:
         """JSON-ready description (kept in ``scores.json``).
@@ -122,7 +144,7 @@ class CaseMix:
         dict
         """
         return {"effects": list(self.effects), "p_null": self.p_null, "p_single": self.p_single,
-                "snr_range": list(self.snr_range)}
+                "snr_range": list(self.snr_range), "p_ool": self.p_ool}
 
 
 def tier(snr: float) -> str:
@@ -258,6 +280,12 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
         effects = [str(x) for x in rng.choice(names, 2, replace=False)]
     target = float(np.exp(rng.uniform(np.log(mix.snr_range[0]), np.log(mix.snr_range[1]))))
     drawn = {n: draw_effect(rng, n, 1.0) for n in effects}
+    ool = None
+    if mix.p_ool > 0.0:  # its own stream: the other cases of the seed stay as they are without it
+        rng_ool = np.random.default_rng([seed, k, 1])
+        if rng_ool.random() < mix.p_ool:
+            ool = draw_out_of_library(rng_ool, duration_s)
+            effects, drawn = [], {}
     theta = {kn.name: float(rng.uniform(-1, 1) * kn.tolerance) for kn in NOMINAL_KNOBS}
     scn = load_scenario(scenario_path)
     s = copy.copy(scn)
@@ -304,6 +332,8 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     if effects and any(v != 1.0 for v in scales.values()):
         eff = validate_effects({n: scaled({n: drawn[n]}, scales[n])[n] for n in effects}, "case")
         simulate(eff)
+    if ool is not None:
+        ool = add_out_of_library(path, ool, target, s.device_nominal, noise)
     label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "amplitude_scale": scales,
              "snr_target": target if effects else 0.0, "snr_by_effect": snr_by,
              "sim_seed": s.seed, "temperature_points": tp, "rate_points": rp,
@@ -316,8 +346,106 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     label["tier_white"] = tier(min(white.values())) if effects else "null"
     # a pair is as detectable as its weaker member
     label["tier"] = tier(min(snr_by.values())) if effects else "null"
+    if ool is not None:
+        label.update(out_of_library=ool, snr_target=target, snr=ool["snr"], tier=tier(ool["snr"]),
+                     tier_white=tier(ool["snr"]))
     atomic_write_text(out / "labels" / f"case_{k:04d}.json", json.dumps(label, indent=1) + "\n")
     return label
+
+
+def draw_out_of_library(rng: np.random.Generator, duration_s: float) -> dict:
+    """Kind and shape of an out-of-library disturbance (:data:`OUT_OF_LIBRARY`), at unit amplitude.
+
+    Parameters
+    ----------
+    rng : Generator
+    duration_s : float
+        Record length.
+
+    Returns
+    -------
+    dict
+        ``kind`` plus ``period_s`` and ``phase_rad`` (bias wander) or ``t_step_s`` and ``rise_s`` (bias step).
+    """
+    kind = str(rng.choice(OUT_OF_LIBRARY))
+    if kind == "bias_wander":
+        return {"kind": kind, "period_s": float(rng.uniform(1200.0, 4800.0)),
+                "phase_rad": float(rng.uniform(0.0, 2 * np.pi))}
+    return {"kind": kind, "t_step_s": float(rng.uniform(0.3, 0.8) * duration_s), "rise_s": 60.0}
+
+
+def out_of_library_shape(ool: dict, t_s: np.ndarray) -> np.ndarray:
+    """The disturbance of ``ool`` at unit amplitude (deg/s per deg/s) at times ``t_s``.
+
+    Parameters
+    ----------
+    ool : dict
+        From :func:`draw_out_of_library`.
+    t_s : ndarray
+
+    Returns
+    -------
+    ndarray
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    if ool["kind"] == "bias_wander":
+        return np.sin(2 * np.pi * t_s / ool["period_s"] + ool["phase_rad"])
+    if ool["kind"] == "bias_step":
+        return 0.5 * (1.0 + np.tanh((t_s - ool["t_step_s"]) / (0.5 * ool["rise_s"])))
+    raise ValueError(f"unknown out-of-library kind {ool['kind']!r} (known: {', '.join(OUT_OF_LIBRARY)})")
+
+
+def add_out_of_library(path: Path, ool: dict, target: float, device_nominal, noise: list) -> dict:
+    """Add an out-of-library disturbance to a case record's rate output, scaled to an SNR target.
+
+    The disturbance enters before the converter (the rate output is put back on its lattice). Its SNR is
+    that of its block means in the rate channel, whitened by the record's slow-state noise model (the one
+    :func:`signature_snr` uses), before any calibration: the nominal knobs can absorb part of a slow
+    disturbance, so this bounds from above what the diagnosis can see. The amplitude is linear in the SNR
+    and capped at :data:`OOL_MAX_DPS`.
+
+    Parameters
+    ----------
+    path : Path
+        The case record, rewritten whole.
+    ool : dict
+        From :func:`draw_out_of_library`.
+    target : float
+        SNR target.
+    device_nominal : Device
+    noise : list
+        Per-channel ``(rho, K, s)`` from :func:`noise_model`.
+
+    Returns
+    -------
+    dict
+        ``ool`` with ``amplitude_dps`` and ``snr``.
+    """
+    from ..averaged import scale_factor_V_per_dps
+    from ..diagram import build_diagram
+    from ..record import read_record
+    from .data import prepare
+    from .fitting import Fitter
+    from .forward import IRATE
+    from .likelihood import innovations
+    rec = read_record(path, warn_unknown=False)
+    cols = {c: np.array(v, dtype=float) for c, v in rec.columns.items()}
+    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
+    fit = Fitter(prepare(rec, sf), device_nominal)
+    unit = out_of_library_shape(ool, cols["time_s"])
+    z = fit.prep.block_mean(out_of_library_shape(ool, fit.prep.t_s) * sf) / fit.S[:, IRATE]
+    rho, K, s_ = noise[IRATE]
+    unit_snr = float(np.sqrt(np.nansum((innovations(z, rho, K) / s_) ** 2)))
+    amp = float(min(target / unit_snr, OOL_MAX_DPS)) if unit_snr > 0 else 0.0
+    lsb = float(device_nominal.values["noise"]["quantization_lsb_V"])
+    v = cols["rate_V"] + amp * unit * sf
+    cols["rate_V"] = np.round(v / lsb) * lsb if lsb > 0 else v
+    # the record's own conversion of the output to deg/s (the nominal scale factor)
+    m = np.isfinite(cols["rate_dps"]) & (cols["rate_dps"] != 0) & np.isfinite(rec.columns["rate_V"])
+    sf_rec = float(np.median(rec.columns["rate_V"][m] / cols["rate_dps"][m])) if m.any() else sf
+    cols["rate_dps"] = cols["rate_V"] / sf_rec
+    write_record(path, type(rec)(cols, rec.metadata))
+    return dict(ool, amplitude_dps=amp, snr=amp * unit_snr)
 
 
 def _scale_to(record_path, scenario_path, device_nominal, theta: dict, drawn: dict, target: float,
