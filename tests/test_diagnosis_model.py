@@ -33,3 +33,34 @@ def test_thermal_lag_time_constant_recovered_to_1e4(tmp_path):
     assert abs(mf.effects["thermal_lag"]["tau_s"] / tau - 1.0) < 2e-4
     z = f.residual(mf._ctx["pred"])[:, ifr]
     assert np.sqrt(np.nanmean(z ** 2)) < 1.0
+
+
+def test_noise_covariance_holds_parameters_at_an_active_bound():
+    """Bounded least squares: a knob the data push past its bound is held there, and an effect column nearly
+    collinear with it then carries the misfit. Its standard error is that of the fit with the knob fixed (the
+    bound removed the collinearity); with every parameter free it would be 20x larger, and a significance test
+    reading it would reject a well-determined effect. Away from the bounds the covariance is the usual one."""
+    from types import SimpleNamespace
+
+    from fmvmg_sim.diagnosis.fitting import Lin
+    n, sigma = 400, 0.01
+    t = np.linspace(0.0, 1.0, n)
+    cols = np.stack([np.ones(n), 1.0 + 0.05 * t], axis=-1)[:, None, :]           # (n, C=1, K=2)
+    rng = np.random.default_rng(3)
+
+    def fit(a_true, b_true):
+        y = (a_true * cols[:, 0, 0] + b_true * cols[:, 0, 1] + sigma * rng.standard_normal(n))[:, None]
+        f = SimpleNamespace(S=np.full((n, 1), sigma), Y=y, present=np.array([True]))
+        lin = Lin(np.zeros((n, 1)), cols, ["knob", "effect.amp"], np.zeros(2), np.array([np.nan, np.nan]),
+                  np.array([-1.0, -10.0]), np.array([1.0, 10.0]))
+        return Fitter.solve(f, lin, np.ones(n, bool))
+
+    sol = fit(1.5, 0.0)                               # the knob wants 1.5: held at its bound 1
+    assert sol.x[0] == 1.0 and 0.3 < sol.x[1] < 0.6
+    c = cols[:, 0, 1]
+    assert sol.cov_noise[0, 0] == 0.0 and sol.cov_noise[0, 1] == 0.0
+    assert np.isclose(np.sqrt(sol.cov_noise[1, 1]), sigma / np.sqrt(np.sum(c ** 2)), rtol=1e-9)
+    H = np.einsum("nk,nl->kl", cols[:, 0, :], cols[:, 0, :]) / sigma ** 2
+    assert np.sqrt(np.linalg.inv(H)[1, 1]) > 20 * np.sqrt(sol.cov_noise[1, 1])
+    free = fit(0.5, 0.2)                              # inside the bounds: the ordinary inverse
+    assert np.allclose(free.cov_noise, np.linalg.inv(H), rtol=1e-6)

@@ -82,7 +82,9 @@ class Solution:
     n : int
         Data rows used.
     cov_noise : ndarray, optional
-        Covariance under the noise model alone (not inflated by a systematic misfit).
+        Covariance under the noise model alone (not inflated by a systematic misfit), with the parameters at
+        an active bound held fixed (zero rows and columns): a bound that holds a knob removes that knob's
+        collinearity with the others, which a covariance with every parameter free would still charge them.
     """
 
     x: np.ndarray
@@ -298,9 +300,10 @@ class Fitter:
         d = ds / scale
         x = lin.x0 + d
         cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
-        cov0 = scaled_inverse(M.T @ M + P.T @ P)
+        H0 = M.T @ M + P.T @ P
+        cov0 = scaled_inverse(H0)
         red = cost / max(n - K, 1)
-        return Solution(x, cov0 * max(red, 1.0), cost, n, cov0)
+        return Solution(x, cov0 * max(red, 1.0), cost, n, _free_inverse(H0, ds, lo, hi))
 
     def set_score_floor(self, table: ResponseTable, die_b: np.ndarray, die_floor_K: float,
                         rel_floor: float = 0.0) -> None:
@@ -397,6 +400,28 @@ def effect_bounds(name: str) -> tuple[list, np.ndarray, np.ndarray]:
     """
     spec = MODELS[name]
     return list(spec), np.array([p.lo for p in spec.values()]), np.array([p.hi for p in spec.values()])
+
+
+def _free_inverse(H: np.ndarray, ds: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Inverse of ``H`` over the parameters not at an active bound; zero rows and columns for those at one.
+
+    Parameters
+    ----------
+    H : ndarray
+        Normal matrix.
+    ds, lo, hi : ndarray
+        Solution and bounds, in the same (scaled) units.
+
+    Returns
+    -------
+    ndarray
+    """
+    tol = 1e-9 * np.maximum(hi - lo, 1e-300)
+    free = ~((ds - lo <= tol) | (hi - ds <= tol))
+    out = np.zeros_like(H)
+    if free.any():
+        out[np.ix_(free, free)] = scaled_inverse(H[np.ix_(free, free)])
+    return out
 
 
 def scaled_inverse(H: np.ndarray) -> np.ndarray:
