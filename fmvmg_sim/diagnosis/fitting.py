@@ -303,7 +303,7 @@ class Fitter:
         H0 = M.T @ M + P.T @ P
         cov0 = scaled_inverse(H0)
         red = cost / max(n - K, 1)
-        return Solution(x, cov0 * max(red, 1.0), cost, n, _free_inverse(H0, ds, lo, hi))
+        return Solution(x, cov0 * max(red, 1.0), cost, n, _free_inverse(H0, cov0, ds, lo, hi))
 
     def set_score_floor(self, table: ResponseTable, die_b: np.ndarray, die_floor_K: float,
                         rel_floor: float = 0.0) -> None:
@@ -402,13 +402,15 @@ def effect_bounds(name: str) -> tuple[list, np.ndarray, np.ndarray]:
     return list(spec), np.array([p.lo for p in spec.values()]), np.array([p.hi for p in spec.values()])
 
 
-def _free_inverse(H: np.ndarray, ds: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def _free_inverse(H: np.ndarray, H_inv: np.ndarray, ds: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Inverse of ``H`` over the parameters not at an active bound; zero rows and columns for those at one.
 
     Parameters
     ----------
     H : ndarray
         Normal matrix.
+    H_inv : ndarray
+        Its inverse (:func:`scaled_inverse`), returned as it is when no parameter is at a bound.
     ds, lo, hi : ndarray
         Solution and bounds, in the same (scaled) units.
 
@@ -418,6 +420,8 @@ def _free_inverse(H: np.ndarray, ds: np.ndarray, lo: np.ndarray, hi: np.ndarray)
     """
     tol = 1e-9 * np.maximum(hi - lo, 1e-300)
     free = ~((ds - lo <= tol) | (hi - ds <= tol))
+    if free.all():
+        return H_inv
     out = np.zeros_like(H)
     if free.any():
         out[np.ix_(free, free)] = scaled_inverse(H[np.ix_(free, free)])
