@@ -15,9 +15,12 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
 * every rate also by SNR tier, and (``white_noise_tiers``) with the tiers of the former SNR definition
   that counted white block noise only;
 * out-of-library cases (only with ``--ool-fraction``; they count neither as null nor as effect cases):
-  ``ool_unexplained_rate`` (verdict "unexplained", the right answer), ``ool_attributed_rate`` (a library
-  effect claimed), ``ool_none_rate`` (verdict "none"), each over all of them and (``_above``) over those
-  above the detection limit.
+  ``ool_unexplained_rate`` (verdict "unexplained", the right answer, whether or not a library effect
+  explains a part of the gap), ``ool_attributed_rate`` (a library effect claimed), ``ool_confident_rate``
+  (a library effect claimed with no remainder: confidently mis-attributed), ``ool_none_rate`` (verdict
+  "none"), each over all of them and (``_above``) over those above the detection limit;
+* ``partial_when_right``: correct attributions (``top1`` or ``pair_exact``) whose verdict is nevertheless
+  "unexplained" (the accepted set leaves a located gap open), over ``right_cases``.
 """
 
 from __future__ import annotations
@@ -111,10 +114,13 @@ def score(labels: list[dict], results: list[dict]) -> dict:
         r = {"case": lab["case"], "truth": truth, "tier": lab["tier"], "tier_white": lab.get("tier_white", lab["tier"]),
              "snr": lab["snr"], "error": res.get("error"),
              "verdict": None if err else res["verdict"], "accepted": acc}
+        # "unexplained" beside accepted effects: they explain part of the gap, not where it lies
+        partial = bool(not err and acc and res["verdict"] == "unexplained")
         if lab.get("out_of_library"):
             r["out_of_library"] = lab["out_of_library"]["kind"]
             r["ool_unexplained"] = bool(not err and res["verdict"] == "unexplained")
             r["ool_attributed"] = bool(acc)
+            r["ool_confident"] = bool(acc and not partial)
             r["ool_none"] = bool(not err and res["verdict"] == "none")
         elif not truth:
             r["false_alarm"] = bool(claimed)
@@ -127,6 +133,8 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             r["pair_exact"] = bool(sorted(acc) == truth)
             r["pair_one"] = bool(set(acc) & set(truth))
             r["in_set"] = bool(set(truth) <= (set(acc) | amb))
+        if truth and not lab.get("out_of_library"):
+            r["partial"] = partial
         right = [t for t in truth if t in acc]
         if right and not err:
             sh = [res["rows"][t]["shrink"] for t in right if res["rows"].get(t, {}).get("shrink") is not None]
@@ -149,6 +157,9 @@ def score(labels: list[dict], results: list[dict]) -> dict:
     out["pairs_exact_above"], out["pair_cases_above"] = rate("pair_exact", lambda r: r["tier"] == "above")
     out["pairs_at_least_one"], _ = rate("pair_one", lambda r: True)
     out["truth_in_ambiguity_set"], _ = rate("in_set", lambda r: r["tier"] == "above")
+    # correct attributions (top-1 right, or a pair's exact set) whose verdict still calls a part unexplained
+    out["partial_when_right"], out["right_cases"] = rate(
+        "partial", lambda r: r.get("top1") is True or r.get("pair_exact") is True)
     sh = [r["shrink"] for r in rows if r.get("shrink") is not None]
     out["median_shrink"] = float(np.median(sh)) if sh else None
     pe = [r["param_rel_error"] for r in rows if r.get("param_rel_error") is not None]
@@ -157,7 +168,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
     if ool:
         out["ool_cases"] = len(ool)
         out["ool_cases_above"] = sum(r["tier"] == "above" for r in ool)
-        for key in ("ool_unexplained", "ool_attributed", "ool_none"):
+        for key in ("ool_unexplained", "ool_attributed", "ool_confident", "ool_none"):
             out[f"{key}_rate"] = rate(key, lambda r: True)[0]
             out[f"{key}_rate_above"] = rate(key, lambda r: r["tier"] == "above")[0]
     out["by_tier"] = {}

@@ -30,6 +30,11 @@ ALLAN_BANDS = {"white": (0.0, 2.0), "flicker": (10.0, 300.0), "random_walk": (30
                "drift": (2000.0, np.inf)}
 REGIMES = ("hold", "heating", "cooling", "post_ramp_hold", "settled_hold")
 ALPHA = 0.05
+#: Groups whose significant statistics locate a gap (a channel-level excess alone does not).
+LOCATED = ("allan_bands", "regimes")
+#: A located statistic that a model closes by less than this share of its excess over the null (and that
+#: stays significant) is an open remainder (:func:`closure`).
+CLOSURE_MIN = 0.5
 
 
 def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool = False) -> list[dict]:
@@ -337,3 +342,56 @@ def significant(loc: dict) -> list[tuple[str, str, float]]:
     s = [(g, n, d["p_holm"]) for g in ("channels", "allan_bands", "regimes") for n, d in loc[g].items()
          if d["significant"]]
     return sorted(s, key=lambda r: r[2])
+
+
+def _excess(group: str, value: float, null_log_mean: float) -> float:
+    """A statistic's excess over the null in mean-square units (an Allan band holds a mean log deviation)."""
+    if group == "allan_bands":
+        return max(0.0, float(np.exp(2.0 * value) - np.exp(2.0 * null_log_mean)))
+    return max(0.0, float(value - np.exp(null_log_mean)))
+
+
+def closure(before: dict, measured_after: dict, nulls: list[dict], alpha: float = ALPHA,
+            closure_min: float = CLOSURE_MIN) -> dict:
+    """Whether a model closes the located gap: each located statistic before and after it, against the null.
+
+    The located statistics (:data:`LOCATED`) that are significant against the null with the calibrated
+    nominal model (``before``, from :func:`compare`) are read again with the model's residual
+    (``measured_after``, from :func:`residual_stats` on the same record and blocks) against the same null
+    replicates, Holm-corrected over the whole after set. Each one's shrink is ``1 - E_after / E_before``,
+    ``E`` its excess over the null in mean-square units (a regime's mean square of normalised block
+    residuals, an Allan band's squared deviation). A statistic that is still significant after and shrinks
+    by less than ``closure_min`` is *open*: the model leaves that part of the gap where it was.
+
+    Parameters
+    ----------
+    before : dict
+        :func:`compare` of the nominal model's statistics.
+    measured_after : dict
+        :func:`residual_stats` of the model's residual.
+    nulls : list of dict
+        The null replicates' statistics (the same as for ``before``).
+    alpha : float, optional
+    closure_min : float, optional
+
+    Returns
+    -------
+    dict
+        ``checked``: one row per located statistic significant before (``group``, ``name``, ``z_before``,
+        ``z_after``, ``p_holm_after``, ``shrink``, ``open``); ``open``: the open ones.
+    """
+    after = compare(measured_after, nulls, alpha)
+    rows = []
+    for g in LOCATED:
+        for name, b in before[g].items():
+            a = after[g].get(name)
+            if not b["significant"] or a is None:
+                continue
+            mu = float(np.log(max(b["null_mean"], 1e-300)))
+            e0 = _excess(g, b["value"], mu)
+            e1 = _excess(g, a["value"], mu)
+            shrink = 1.0 - e1 / e0 if e0 > 0 else 1.0
+            rows.append({"group": g, "name": name, "z_before": b["z"], "z_after": a["z"],
+                         "p_holm_after": a["p_holm"], "shrink": float(shrink),
+                         "open": bool(a["significant"] and shrink < closure_min)})
+    return {"checked": rows, "open": [r for r in rows if r["open"]]}

@@ -395,14 +395,28 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                 r["shrink"] = combined["shrink"].get(primary)
     # 'unexplained' needs a gap beyond the (Holm-corrected) null band in an Allan band or a temperature
     # regime: a channel-level excess alone (one statistic against a few null runs) is not a located gap
-    sig_located = [s_ for s_ in sig if s_[0] in ("allan_bands", "regimes")]
+    sig_located = [s_ for s_ in sig if s_[0] in loc.LOCATED]
+    # does the accepted model close the located gap? Its training-window fit (the calibration's window),
+    # predicted over the whole record, read with the same statistics against the same null. Not judged
+    # beside accepted flicker, whose noise-level model is not in the residual.
+    closure = None
+    if att["final"] is not None and sig_located and not flick_ok:
+        Z_fin = fitter.residual(final_pred_tr)
+        st_fin = loc.residual_stats(prep, Z_fin, _rate_residual(prep, final_pred_tr, prep.obs["rate_V"]))
+        closure = loc.closure(localization, st_fin, st_null)
     if not accepted:
         verdict = "unexplained" if sig_located else "none"
+    elif closure and closure["open"]:
+        verdict = "unexplained"  # partial: the accepted effects explain part of the gap, not where it lies
     else:
         verdict = "ambiguous" if amb else "explained"
     remainder = None
     if sig_located and not accepted:
-        remainder = {"significant": [{"group": g, "name": n, "p_holm": p} for g, n, p in sig]}
+        remainder = {"significant": [{"group": g, "name": n, "p_holm": p} for g, n, p in sig], "partial": False}
+    elif closure and closure["open"]:
+        remainder = {"significant": [{"group": r["group"], "name": r["name"], "p_holm": r["p_holm_after"]}
+                                     for r in sorted(closure["open"], key=lambda r: r["p_holm_after"])],
+                     "partial": True, "explained_by": list(att["selected"])}
     ranked = rank_rows(ranked, accepted)
     lookalike_of = {o: a for a, others in amb.items() for o in others}
     for r in ranked:
@@ -425,6 +439,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     report = {
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
+        "closure": closure,
         "primary_metric": primary, "combined": combined,
         "calibration": cal.to_json(),
         "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,
