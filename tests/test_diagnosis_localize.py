@@ -35,6 +35,36 @@ def test_holm_correction_scales_p_values():
 
 
 
+def _located(regime_ms, band_log_adev):
+    return {"channels": {}, "allan_bands": {"drift": band_log_adev}, "regimes": {"hold": regime_ms}}
+
+
+def test_closure_shrink_in_mean_square_units_and_open_remainders():
+    # nulls: a regime mean square of 1 (log spread 0.1) and an Allan drift band at log ADEV -3 (spread 0.05)
+    nulls = [_located(np.exp(0.1 * e), -3.0 + 0.05 * e) for e in (-1.5, -0.5, 0.5, 1.5)]
+    before = loc.compare(_located(10.0, -2.0), nulls)
+    assert before["regimes"]["hold"]["significant"] and before["allan_bands"]["drift"]["significant"]
+    mu_r = np.log(before["regimes"]["hold"]["null_mean"])
+    mu_a = np.log(before["allan_bands"]["drift"]["null_mean"])
+    # a model that leaves the regime's excess where it was and removes 90 % of the band's squared deviation
+    band_after = 0.5 * np.log(np.exp(2 * mu_a) + 0.1 * (np.exp(-4.0) - np.exp(2 * mu_a)))
+    out = loc.closure(before, _located(10.0, band_after), nulls)
+    rows = {r["name"]: r for r in out["checked"]}
+    assert abs(rows["hold"]["shrink"]) < 1e-12 and rows["hold"]["open"]
+    assert abs(rows["drift"]["shrink"] - 0.9) < 1e-9 and not rows["drift"]["open"]
+    assert [r["name"] for r in out["open"]] == ["hold"]
+    # a regime's excess cut by 60 %: closed (the share of the excess, not the z-score, decides)
+    ms_after = np.exp(mu_r) + 0.4 * (10.0 - np.exp(mu_r))
+    out = loc.closure(before, _located(ms_after, band_after), nulls)
+    hold = next(r for r in out["checked"] if r["name"] == "hold")
+    assert abs(hold["shrink"] - 0.6) < 1e-9 and not hold["open"] and out["open"] == []
+    # a regime back at the null is closed, the band left where it was is open; nothing located, nothing read
+    out = loc.closure(before, _located(np.exp(mu_r) * 1.05, -2.0), nulls)
+    assert [r["name"] for r in out["open"]] == ["drift"]
+    quiet = loc.compare(_located(1.0, -3.0), nulls)
+    assert loc.closure(quiet, _located(10.0, -2.0), nulls) == {"checked": [], "open": []}
+
+
 def test_window_spread_matches_analytic_for_white_and_correlated_noise():
     # log of a mean square over n samples: spread sqrt(2 / EDF), EDF = n for white noise and
     # n (1 - rho^2) / (1 + rho^2) for an AR(1) series

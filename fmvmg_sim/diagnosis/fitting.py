@@ -302,8 +302,17 @@ class Fitter:
         cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
         H0 = M.T @ M + P.T @ P
         cov0 = scaled_inverse(H0)
-        red = cost / max(n - K, 1)
-        return Solution(x, cov0 * max(red, 1.0), cost, n, _free_inverse(H0, cov0, ds, lo, hi))
+        # the reported covariance: each channel's rows scaled by that channel's own reduced chi-square (when
+        # above 1). One channel's misfit (the rate output's flicker wander, an unmodelled disturbance) then
+        # widens the knobs that channel determines, not those a well-fitted channel pins
+        res = np.where(ok, r0 - A @ d, 0.0)
+        red_c = np.ones(A.shape[1])
+        for c in range(A.shape[1]):
+            nc = int(ok[:, c].sum())
+            if nc > 0:
+                red_c[c] = max(float(np.sum(res[:, c] ** 2)) / max(nc - K / ok.any(axis=0).sum(), 1.0), 1.0)
+        Hr = np.einsum("ic,ick,icl->kl", ok / red_c[None, :], np.nan_to_num(A), np.nan_to_num(A)) + P.T @ P
+        return Solution(x, scaled_inverse(Hr), cost, n, _free_inverse(H0, cov0, ds, lo, hi))
 
     def set_score_floor(self, table: ResponseTable, die_b: np.ndarray, die_floor_K: float,
                         rel_floor: float = 0.0) -> None:
