@@ -75,3 +75,27 @@ def test_out_of_library_cases_are_scored_apart_from_nulls():
     assert [r.get("out_of_library") for r in sc["rows"]] == [None, "bias_wander", "bias_step", "bias_step"]
     assert sc["median_shrink"] is None           # no true effect was attributed
     assert "ool_cases" not in score(labs[:1], results[:1])
+
+
+def test_partial_verdicts_are_scored_as_flagged_remainders():
+    # "unexplained" beside accepted effects (they explain part of the gap, not where it lies): on an
+    # out-of-library case a flagged remainder, not a confident mis-attribution; on a right attribution it still
+    # counts as right for top-1, and is counted in partial_when_right
+    from fmvmg_sim.diagnosis.benchmark import score
+
+    def res(verdict, accepted=()):
+        return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted), "ambiguous_with": {},
+                "rows": {a: {"shrink": 0.9, "params": {}} for a in accepted}}
+    ool = {"effects": {}, "tier": "above", "snr": 90.0, "out_of_library": {"kind": "bias_step"}}
+    labs = [dict(ool, case=0), dict(ool, case=1),
+            {"case": 2, "effects": {"thermal_lag": {}}, "tier": "above", "snr": 50.0},
+            {"case": 3, "effects": {"feedthrough": {}}, "tier": "above", "snr": 50.0},
+            {"case": 4, "effects": {"duffing": {}, "feedthrough": {}}, "tier": "above", "snr": 50.0}]
+    results = [res("unexplained", ["quadrature_drift"]), res("ambiguous", ["mode_split_drift"]),
+               res("unexplained", ["thermal_lag"]), res("explained", ["feedthrough"]),
+               res("explained", ["duffing", "feedthrough"])]
+    sc = score(labs, results)
+    assert sc["ool_unexplained_rate"] == 0.5 and sc["ool_attributed_rate"] == 1.0
+    assert sc["ool_confident_rate"] == 0.5 and sc["ool_confident_rate_above"] == 0.5
+    assert sc["top1"] == 1.0 and sc["pairs_exact"] == 1.0
+    assert sc["right_cases"] == 3 and sc["partial_when_right"] == 1 / 3

@@ -64,3 +64,31 @@ def test_noise_covariance_holds_parameters_at_an_active_bound():
     assert np.sqrt(np.linalg.inv(H)[1, 1]) > 20 * np.sqrt(sol.cov_noise[1, 1])
     free = fit(0.5, 0.2)                              # inside the bounds: the ordinary inverse
     assert np.allclose(free.cov_noise, np.linalg.inv(H), rtol=1e-6)
+
+
+def test_covariance_scales_each_channel_by_its_own_misfit():
+    """A knob read from a well-fitted channel keeps its white-noise error when another channel carries a
+    large unmodelled wander; the knob that channel determines is widened by that channel's own reduced
+    chi-square. (A global reduced chi-square would widen both by about 7x here.)"""
+    from types import SimpleNamespace
+
+    from fmvmg_sim.diagnosis.fitting import Lin
+    n, sigma = 500, 0.01
+    t = np.linspace(0.0, 1.0, n)
+    cols = np.zeros((n, 2, 2))
+    cols[:, 0, 0] = 1.0                               # knob 0: an offset in channel 0 only
+    cols[:, 1, 1] = 1.0                               # knob 1: an offset in channel 1 only
+    rng = np.random.default_rng(5)
+    y = np.column_stack([0.3 + 10 * sigma * np.sin(2 * np.pi * 3 * t) + sigma * rng.standard_normal(n),
+                         -0.2 + sigma * rng.standard_normal(n)])
+    f = SimpleNamespace(S=np.full((n, 2), sigma), Y=y, present=np.array([True, True]))
+    lin = Lin(np.zeros((n, 2)), cols, ["a", "b"], np.zeros(2), np.array([np.nan, np.nan]),
+              np.array([-1.0, -1.0]), np.array([1.0, 1.0]))
+    sol = Fitter.solve(f, lin, np.ones(n, bool))
+    assert np.allclose(sol.x, y.mean(axis=0), atol=1e-9)
+    red = [np.sum((y[:, c] - y[:, c].mean()) ** 2) / sigma ** 2 / (n - 1) for c in range(2)]
+    assert red[0] > 40 and red[1] < 1.2
+    sd = np.sqrt(np.diag(sol.cov))
+    assert np.isclose(sd[0], np.sqrt(red[0]) * sigma / np.sqrt(n), rtol=1e-6)
+    assert np.isclose(sd[1], np.sqrt(max(red[1], 1.0)) * sigma / np.sqrt(n), rtol=1e-6)
+    assert np.allclose(np.sqrt(np.diag(sol.cov_noise)), sigma / np.sqrt(n), rtol=1e-6)  # the noise model alone
