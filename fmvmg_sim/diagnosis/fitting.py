@@ -76,7 +76,7 @@ class Solution:
     ----------
     x : ndarray
     cov : ndarray
-        Covariance (inflated by the reduced chi-square when above 1).
+        Covariance with each channel's rows scaled by that channel's own reduced chi-square (when above 1).
     cost : float
         Weighted sum of squares of the data rows.
     n : int
@@ -305,14 +305,13 @@ class Fitter:
         # the reported covariance: each channel's rows scaled by that channel's own reduced chi-square (when
         # above 1). One channel's misfit (the rate output's flicker wander, an unmodelled disturbance) then
         # widens the knobs that channel determines, not those a well-fitted channel pins
-        res = np.where(ok, r0 - A @ d, 0.0)
-        red_c = np.ones(A.shape[1])
-        for c in range(A.shape[1]):
-            nc = int(ok[:, c].sum())
-            if nc > 0:
-                red_c[c] = max(float(np.sum(res[:, c] ** 2)) / max(nc - K / ok.any(axis=0).sum(), 1.0), 1.0)
-        Hr = np.einsum("ic,ick,icl->kl", ok / red_c[None, :], np.nan_to_num(A), np.nan_to_num(A)) + P.T @ P
-        return Solution(x, scaled_inverse(Hr), cost, n, _free_inverse(H0, cov0, ds, lo, hi))
+        # (the K degrees of freedom shared out evenly over the channels with data)
+        Aok = np.where(ok[:, :, None], A, 0.0)
+        nc = ok.sum(axis=0)
+        ssr = np.sum(np.where(ok, r0 - Aok @ d, 0.0) ** 2, axis=0)
+        red_c = np.maximum(ssr / np.maximum(nc - K / max(int((nc > 0).sum()), 1), 1.0), 1.0)
+        Mr = (Aok / np.sqrt(red_c)[None, :, None]).reshape(-1, K)
+        return Solution(x, scaled_inverse(Mr.T @ Mr + PtP), cost, n, _free_inverse(H0, cov0, ds, lo, hi))
 
     def set_score_floor(self, table: ResponseTable, die_b: np.ndarray, die_floor_K: float,
                         rel_floor: float = 0.0) -> None:

@@ -158,7 +158,8 @@ JACKKNIFE_SEGMENTS = 6
 def posterior_draws(cal, fitter: Fitter, rows: np.ndarray, n: int, seed: int) -> list[dict]:
     """Nominal knobs drawn around the calibration with its estimation spread, inside the calibration bounds.
 
-    The spread is the Laplace (white-noise) posterior plus a delete-a-segment jackknife: the calibration is
+    The spread is the Laplace posterior (each channel's rows scaled by its own reduced chi-square:
+    :class:`~.fitting.Solution`) plus a delete-a-segment jackknife: the calibration is
     re-solved (linearised) without each of :data:`JACKKNIFE_SEGMENTS` contiguous stretches of its training
     window. Slow noise (the rate output's flicker wander) and the temperatures a stretch alone covers move the
     estimate far more than white noise would; the jackknife sees both.
