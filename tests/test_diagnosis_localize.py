@@ -102,9 +102,9 @@ def test_null_replicates_carry_the_calibration_error(tmp_path):
     """A null record whose last heating ramp runs 20 K past the training window's temperatures.
 
     The calibrated nominal model extrapolates there with its estimation error; the null replicates,
-    simulated with knobs drawn from the calibration's spread (white-noise posterior plus a
-    delete-a-segment jackknife), carry the same error. Replicates of the calibrated model itself (no
-    estimation error) left the heating regime at z = 3.9 ("unexplained")."""
+    simulated with knobs drawn from the calibration's posterior and each re-calibrated on the same
+    training window, carry the same kind of error. Replicates of the calibrated model itself read against
+    it (no estimation error) left the heating regime at z = 3.9 ("unexplained")."""
     from fmvmg_sim.diagnosis.cases import make_case
     from fmvmg_sim.diagnosis.pipeline import diagnose
     label = make_case(28, 4242, tmp_path, str(NOMINAL))
@@ -154,3 +154,32 @@ def test_flicker_band_ignores_a_leftover_gradient_term():
     for k in range(1, n):
         slow[k] = a * slow[k - 1] + e[k]
     assert band_excess(*allan(sigma * rng.standard_normal(n) + slow, True), nulls[True], span_s=n)[1] > 3.0
+
+
+def test_heating_minus_cooling_floor_is_the_chi_square_spread():
+    # the mean of k squared heating-minus-cooling differences of white block residuals: its log spreads by
+    # at least sqrt(2 / k) (chi-square with k dof; bins of unequal size spread it more), the floor it now gets
+    prep = _oven_prep()
+    rng = np.random.default_rng(11)
+    rr = np.zeros(len(prep.t_s))
+    logs, floors = [], set()
+    for _ in range(300):
+        Z = rng.standard_normal((prep.n_blocks, 5))
+        st = loc.residual_stats(prep, Z, rr)
+        logs.append(np.log(st["regimes"]["heating_minus_cooling_rate_V"]))
+        floors.add(st["_sd_floor"]["heating_minus_cooling_rate_V"])
+    (floor, k), = floors
+    assert k >= 5 and abs(floor - np.sqrt(2.0 / k)) < 1e-12
+    assert floor * 0.9 < np.std(logs) < floor * 2.0
+    # four replicates that agree by chance (log spread 0.14, as on benchmark case 66260/24, a null case):
+    # a 2.9x value was "located" without the floor, and is not with it
+    name = "heating_minus_cooling_rate_V"
+
+    def st(v, fl=True):
+        return {"channels": {}, "allan_bands": {}, "regimes": {name: v},
+                "_sd_floor": {name: (floor, k)} if fl else {}}
+    vals = np.exp(np.log(0.053) + 0.14 * np.array([-1.2, -0.4, 0.4, 1.2]) / 0.86)
+    assert loc.compare(st(0.1535, False), [st(v, False) for v in vals])["regimes"][name]["z"] > 5
+    assert not loc.compare(st(0.1535), [st(v) for v in vals])["regimes"][name]["significant"]
+    # a gap twenty times the null's still is
+    assert loc.compare(st(20 * 0.053), [st(v) for v in vals])["regimes"][name]["significant"]

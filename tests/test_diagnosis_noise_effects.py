@@ -55,3 +55,13 @@ def test_band_shape_needs_three_taus_and_two_nulls():
     taus = np.array([16.0, 32.0, 64.0, 128.0])
     assert band_shape(taus, np.ones(4), [np.ones(4)]) == (0.0, 0.0)
     assert band_shape(taus[:2], np.ones(2), [np.ones(2), np.ones(2)]) == (0.0, 0.0)
+
+
+def test_a_null_frozen_on_one_converter_level_is_not_judged():
+    # every null replicate's output on one converter level: Allan deviation 0 at every tau, no spread to
+    # judge the record's against (benchmark case 66260/33 raised a LinAlgError here)
+    rng = np.random.default_rng(5)
+    taus, meas = _adev(WHITE_DPS * rng.standard_normal(N))
+    frozen = [np.zeros_like(meas) for _ in range(4)]
+    assert band_excess(taus, meas, frozen, span_s=N)[1] == 0.0
+    assert band_shape(taus, meas, frozen, span_s=N) == (0.0, 0.0)

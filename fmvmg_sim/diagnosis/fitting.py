@@ -255,7 +255,7 @@ class Fitter:
                              else -BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]),
                    np.array([BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]))
 
-    def solve(self, lin: Lin, rows: np.ndarray) -> Solution:
+    def solve(self, lin: Lin, rows: np.ndarray, Y: np.ndarray | None = None) -> Solution:
         """Weighted, prior-regularised, bounded linear least squares on the blocks in ``rows``.
 
         Parameters
@@ -263,13 +263,15 @@ class Fitter:
         lin : Lin
         rows : ndarray of bool
             Blocks to fit.
+        Y : ndarray, optional
+            Other observations on the same blocks (a null replicate); default the record's.
 
         Returns
         -------
         Solution
         """
         W = 1.0 / self.S[rows]
-        r0 = (self.Y[rows] - lin.y0[rows]) * W
+        r0 = ((self.Y if Y is None else Y)[rows] - lin.y0[rows]) * W
         A = lin.cols[rows] * W[:, :, None]
         ok = np.isfinite(r0) & self.present[None, :]
         b = r0[ok]

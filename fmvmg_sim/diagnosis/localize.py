@@ -150,7 +150,11 @@ def residual_stats(prep: Prepared, Zb: np.ndarray, rate_res_dps: np.ndarray, mas
                 if h.sum() >= 2 and k.sum() >= 2:
                     d.append(np.nanmean(Zb[h, i]) - np.nanmean(Zb[k, i]))
             if d:
-                out["regimes"][f"heating_minus_cooling_{c}"] = float(np.mean(np.square(d)))
+                name = f"heating_minus_cooling_{c}"
+                out["regimes"][name] = float(np.mean(np.square(d)))
+                # sampling spread of the log of a mean of len(d) squared differences (chi-square with
+                # len(d) degrees of freedom when the bins are independent), a floor on the null's spread
+                out["_sd_floor"][name] = (float(np.sqrt(2.0 / len(d))), len(d))
     fs = 1.0 / prep.sample_interval_s
     taus, adev, span = residual_allan(prep, rate_res_dps, mask_s)
     if len(adev):

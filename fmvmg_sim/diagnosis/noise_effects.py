@@ -85,6 +85,8 @@ def band_excess(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=
     ref = N.mean(axis=1)
     ex = float(meas - ref.mean())
     sd = float(max(ref.std(ddof=1), np.sqrt(np.mean(rel_var)) * ref.mean(), 0.05 * ref.mean()))
+    if not sd > 0:  # no spread to judge against (a null output frozen on one converter level)
+        return ex, 0.0
     return ex, ex / (sd * np.sqrt(1 + 1 / len(ref)))
 
 
@@ -117,7 +119,13 @@ def band_shape(taus: np.ndarray, adev_meas: np.ndarray, adev_nulls: list, band=_
     ref = N.mean(axis=0)
     e = adev_meas[m] ** 2 - ref
     sd = np.maximum.reduce([N.std(axis=0, ddof=1), np.sqrt(rel_var) * ref, 0.05 * ref]) * np.sqrt(1 + 1 / len(N))
-    A = np.column_stack([np.ones(m.sum()), (taus[m] / taus[m].max()) ** 2]) / sd[:, None]
+    # taus where the null has no spread (an output frozen on one converter level) cannot be judged
+    ok = np.isfinite(sd) & (sd > 0)
+    if ok.sum() < 3:
+        return 0.0, 0.0
+    t = taus[m][ok]
+    e, sd = e[ok], sd[ok]
+    A = np.column_stack([np.ones(len(t)), (t / t.max()) ** 2]) / sd[:, None]
     coef, *_ = np.linalg.lstsq(A, e / sd, rcond=None)
     se = np.sqrt(np.diag(np.linalg.pinv(A.T @ A)))
     return float(coef[0] / se[0]), float(coef[1] / se[1])
