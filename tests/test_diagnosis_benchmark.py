@@ -99,3 +99,44 @@ def test_partial_verdicts_are_scored_as_flagged_remainders():
     assert sc["ool_confident_rate"] == 0.5 and sc["ool_confident_rate_above"] == 0.5
     assert sc["top1"] == 1.0 and sc["pairs_exact"] == 1.0
     assert sc["right_cases"] == 3 and sc["partial_when_right"] == 1 / 3
+
+
+def test_misses_are_counted_by_cause():
+    # each true effect missing from a missed case gets one cause: flicker beside a converter, no held-out fold
+    # able to test it, a look-alike, a much stronger partner found, or an acceptance criterion; a right case none
+    from fmvmg_sim.diagnosis.benchmark import MISS_CAUSES, score
+
+    def res(verdict, accepted=(), amb=None, rows=None):
+        rw = {a: {"shrink": 0.9, "params": {}, "accepted": True, "folds_testable": 3, "why_not": []} for a in accepted}
+        rw.update(rows or {})
+        return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted) + list(rows or {}),
+                "ambiguous_with": amb or {}, "rows": rw}
+
+    def lab(case, effects, snr=None, tier="above"):
+        return {"case": case, "effects": {e: {} for e in effects}, "tier": tier, "snr": 50.0,
+                "snr_by_effect": snr or {e: 50.0 for e in effects}}
+    nope = {"folds_testable": 3, "why_not": ["held-out gain interval reaches zero"], "accepted": False}
+    labs = [lab(0, ["flicker_noise", "quantization"]),
+            lab(1, ["thermal_hysteresis"]),
+            lab(2, ["mode_split_drift"]),
+            lab(3, ["q_factor_drift", "thermal_lag"], {"q_factor_drift": 35.0, "thermal_lag": 59000.0}),
+            lab(4, ["feedthrough"]),
+            lab(5, ["duffing"]),
+            lab(6, ["duffing", "reference_drift"], {"duffing": 40.0, "reference_drift": 60.0})]
+    results = [res("explained", ["quantization"]),
+               res("none", rows={"thermal_hysteresis": dict(nope, folds_testable=0)}),
+               res("ambiguous", ["quadrature_drift"], {"quadrature_drift": ["mode_split_drift"]},
+                   {"mode_split_drift": dict(nope, why_not=["look-alike of quadrature_drift"])}),
+               res("explained", ["thermal_lag"], rows={"q_factor_drift": nope}),
+               res("none", rows={"feedthrough": nope}),
+               res("explained", ["duffing"]),
+               res("explained", ["reference_drift"], rows={"duffing": nope})]
+    sc = score(labs, results)
+    miss = [r.get("miss") for r in sc["rows"]]
+    assert miss == [{"flicker_noise": "hidden_by_converter"}, {"thermal_hysteresis": "no_heldout_test"},
+                    {"mode_split_drift": "look_alike"}, {"q_factor_drift": "beside_stronger"},
+                    {"feedthrough": "criteria"}, None, {"duffing": "criteria"}]
+    assert set(sc["misses_by_cause"]["single_above"]) == set(MISS_CAUSES)
+    assert sc["misses_by_cause"]["single_above"]["no_heldout_test"] == 1
+    assert sc["misses_by_cause"]["pairs"] == dict({k: 0 for k in MISS_CAUSES}, hidden_by_converter=1,
+                                                  beside_stronger=1, criteria=1)

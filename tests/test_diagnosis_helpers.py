@@ -26,8 +26,9 @@ segments = [
 
 
 def oven_record(tmp: Path, name: str, effects: dict | None = None, seed: int = 1, rate_Hz: float = 1.0,
-                noise: bool = True, theta: dict | None = None):
-    """Simulate the short oven profile with ``effects`` and write ``tmp/name.csv``.
+                noise: bool = True, theta: dict | None = None, profile: str = OVEN, duration_s: float = 10500.0):
+    """Simulate the short oven profile (or ``profile``, a ``[temperature]`` table) with ``effects`` and write
+    ``tmp/name.csv``.
 
     Returns
     -------
@@ -37,7 +38,7 @@ def oven_record(tmp: Path, name: str, effects: dict | None = None, seed: int = 1
 [scenario]
 name = "{name}"
 device_file = "{REPO / 'scenarios' / 'devices' / 'fmvmg_a.toml'}"
-duration_s = 10500.0
+duration_s = {duration_s}
 output_rate_Hz = {rate_Hz}
 seed = {seed}
 fidelity = "envelope"
@@ -49,7 +50,7 @@ electronic = {str(noise).lower()}
 flicker = {str(noise).lower()}
 quantization = {str(noise).lower()}
 rate_random_walk = {str(noise).lower()}
-""" + OVEN
+""" + profile
     if effects:
         body += "[effects]\n" + "".join(
             f"{n} = {{ " + ", ".join(f"{k} = {v!r}" for k, v in ps.items()) + " }\n" for n, ps in effects.items())

@@ -19,6 +19,9 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
   explains a part of the gap), ``ool_attributed_rate`` (a library effect claimed), ``ool_confident_rate``
   (a library effect claimed with no remainder: confidently mis-attributed), ``ool_none_rate`` (verdict
   "none"), each over all of them and (``_above``) over those above the detection limit;
+* ``misses_by_cause``: why each true effect of a missed case (a single effect not first, a pair not exact)
+  was missed (:data:`MISS_CAUSES`, :func:`miss_cause`), for single effects above the limit and for pairs;
+  each case row holds its own as ``miss``;
 * ``partial_when_right``: correct attributions (``top1`` or ``pair_exact``) whose verdict is nevertheless
   "unexplained" (the accepted set leaves a located gap open), over ``right_cases``.
 """
@@ -48,7 +51,8 @@ def _diagnose_case(record: str, scenario: str, n_null: int, out_dir: str) -> dic
     cj = write_report(rep, Path(out_dir))
     return {"record": record, "verdict": cj["verdict"], "accepted": cj["accepted"],
             "ambiguous_with": cj["ambiguous_with"], "ranked": [r["effect"] for r in cj["ranked"]],
-            "rows": {r["effect"]: {"params": r.get("params"), "shrink": r.get("shrink"), "accepted": r["accepted"]}
+            "rows": {r["effect"]: {"params": r.get("params"), "shrink": r.get("shrink"), "accepted": r["accepted"],
+                                   "folds_testable": r.get("folds_testable"), "why_not": r.get("why_not")}
                      for r in cj["ranked"]},
             "combined": cj.get("combined"), "wall_time_s": cj["wall_time_s"]}
 
@@ -89,6 +93,53 @@ def param_errors(effect: str, truth: dict, est: dict) -> list[float]:
         ref = max(abs(v), MODELS[effect][p].prior[0])
         out.append(abs(e - v) / ref)
     return out
+
+
+#: Why a true effect was missed, in the order :func:`miss_cause` tests them.
+MISS_CAUSES = {
+    "hidden_by_converter": "extra flicker beside a coarser converter (not judged there; in the benchmark's cases its "
+                           "wander lies far below one converter step)",
+    "no_heldout_test": "no held-out fold can test the effect as fitted (its prediction moves no fold by the nats a "
+                       "test needs: the signature is absent from the training window or from the held-out blocks)",
+    "look_alike": "a look-alike explains the same gap (the truth is in the ambiguity set or named as the look-alike)",
+    "beside_stronger": "the other member of the pair is at least 100 times stronger and was found",
+    "criteria": "fitted and testable, but short of an acceptance criterion (held-out interval, folds, BIC, bounds)",
+    "ranked_second": "accepted, but another effect ranked first",
+}
+
+
+def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: dict, snr_by: dict) -> str:
+    """Why a true effect is missing from (or not first in) the accepted set: a key of :data:`MISS_CAUSES`.
+
+    Parameters
+    ----------
+    effect : str
+        The true effect.
+    truth, accepted : list of str
+    ambiguous : set of str
+        Every effect named in an ambiguity set.
+    rows : dict
+        The diagnosis' rows by effect (``folds_testable``, ``why_not``).
+    snr_by : dict
+        The label's SNR by effect.
+
+    Returns
+    -------
+    str
+    """
+    if effect in accepted:
+        return "ranked_second"
+    if effect == "flicker_noise" and "quantization" in truth:
+        return "hidden_by_converter"
+    row = rows.get(effect) or {}
+    if row.get("folds_testable") == 0:
+        return "no_heldout_test"
+    if effect in ambiguous or any("look-alike" in w for w in row.get("why_not") or []):
+        return "look_alike"
+    other = [t for t in truth if t != effect]
+    if other and other[0] in accepted and snr_by.get(other[0], 0.0) >= 100.0 * snr_by.get(effect, np.inf):
+        return "beside_stronger"
+    return "criteria"
 
 
 def score(labels: list[dict], results: list[dict]) -> dict:
@@ -135,6 +186,10 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             r["in_set"] = bool(set(truth) <= (set(acc) | amb))
         if truth and not lab.get("out_of_library"):
             r["partial"] = partial
+            missed = (len(truth) == 1 and not r["top1"]) or (len(truth) == 2 and not r["pair_exact"])
+            if missed and not err:
+                r["miss"] = {t: miss_cause(t, truth, acc, amb, res.get("rows") or {}, lab.get("snr_by_effect") or {})
+                             for t in truth if not (len(truth) == 2 and t in acc)}
         right = [t for t in truth if t in acc]
         if right and not err:
             sh = [res["rows"][t]["shrink"] for t in right if res["rows"].get(t, {}).get("shrink") is not None]
@@ -171,6 +226,18 @@ def score(labels: list[dict], results: list[dict]) -> dict:
         for key in ("ool_unexplained", "ool_attributed", "ool_confident", "ool_none"):
             out[f"{key}_rate"] = rate(key, lambda r: True)[0]
             out[f"{key}_rate_above"] = rate(key, lambda r: r["tier"] == "above")[0]
+    # why true effects were missed: each missing member of a missed case (top-1 misses of single effects,
+    # inexact pairs), above the detection limit and over all tiers
+    out["misses_by_cause"] = {}
+    for name, sel in (("single_above", lambda r: len(r["truth"]) == 1 and r["tier"] == "above"),
+                      ("pairs", lambda r: len(r["truth"]) == 2),
+                      ("pairs_above", lambda r: len(r["truth"]) == 2 and r["tier"] == "above")):
+        c = {k: 0 for k in MISS_CAUSES}
+        for r in rows:
+            if sel(r):
+                for cause in r.get("miss", {}).values():
+                    c[cause] += 1
+        out["misses_by_cause"][name] = c
     out["by_tier"] = {}
     for t in ("below", "near", "above"):
         out["by_tier"][t] = {"single_cases": rate("top1", lambda r: r["tier"] == t)[1],

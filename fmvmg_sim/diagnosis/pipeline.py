@@ -383,8 +383,11 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                 r["single_fit_params"] = r.get("params")
                 r["params"] = combined["params"][r["effect"]]
                 r["shrink"] = combined["shrink"].get(primary)
-    # 'unexplained' needs a gap beyond the (Holm-corrected) null band in an Allan band or a temperature
-    # regime: a channel-level excess alone (one statistic against a few null runs) is not a located gap
+    # with no effect accepted, any gap beyond the (Holm-corrected) null band is "unexplained": an Allan band,
+    # a temperature regime or a whole channel (a hysteresis seen only in the quadrature output of a record's
+    # last ramp, where no training window holds it). Measured on the 125 null cases of the stored benchmark
+    # runs, a channel is significant on one, which a regime already made "unexplained". The closure check
+    # below reads the located statistics (bands and regimes) only
     sig_located = [s_ for s_ in sig if s_[0] in loc.LOCATED]
     # does the accepted model close the located gap? Its training-window fit (the calibration's window),
     # predicted over the whole record, read with the same statistics against the same null. Not judged
@@ -395,13 +398,13 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         st_fin = loc.residual_stats(prep, Z_fin, _rate_residual(prep, final_pred_tr, prep.obs["rate_V"]))
         closure = loc.closure(localization, st_fin, st_null)
     if not accepted:
-        verdict = "unexplained" if sig_located else "none"
+        verdict = "unexplained" if sig else "none"
     elif closure and closure["open"]:
         verdict = "unexplained"  # partial: the accepted effects explain part of the gap, not where it lies
     else:
         verdict = "ambiguous" if amb else "explained"
     remainder = None
-    if sig_located and not accepted:
+    if sig and not accepted:
         remainder = {"significant": [{"group": g, "name": n, "p_holm": p} for g, n, p in sig], "partial": False}
     elif closure and closure["open"]:
         remainder = {"significant": [{"group": r["group"], "name": r["name"], "p_holm": r["p_holm_after"]}
