@@ -30,7 +30,8 @@ ALLAN_BANDS = {"white": (0.0, 2.0), "flicker": (10.0, 300.0), "random_walk": (30
                "drift": (2000.0, np.inf)}
 REGIMES = ("hold", "heating", "cooling", "post_ramp_hold", "settled_hold")
 ALPHA = 0.05
-#: Groups whose significant statistics locate a gap (a channel-level excess alone does not).
+#: Groups whose significant statistics locate a gap in time or band; the closure check re-reads these. A
+#: significant channel-level excess alone still makes a record with no accepted effect "unexplained".
 LOCATED = ("allan_bands", "regimes")
 #: A located statistic that a model closes by less than this share of its excess over the null (and that
 #: stays significant) is an open remainder (:func:`closure`).
