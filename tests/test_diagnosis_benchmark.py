@@ -19,6 +19,8 @@ def test_tiny_benchmark(tmp_path, capsys):
     # labels live apart from the records the diagnoser reads
     assert len(list((out / "labels").glob("*.json"))) == 2 and len(list((out / "cases").glob("*.csv"))) == 2
     assert not list((out / "cases").glob("*.json"))
+    # the readable summary beside the scores
+    assert "| false alarms (null cases) |" in (out / "scores.md").read_text()
     # effect amplitudes are scaled to the drawn signature SNR (within 25 %, unless clipped at a bound)
     for lab in (json.loads(p.read_text()) for p in (out / "labels").glob("*.json")):
         for n, snr in lab["snr_by_effect"].items():

@@ -75,6 +75,7 @@ def main(args) -> int:
     if args.json:
         sys.stdout.write(json.dumps(slim, default=float) + "\n")
     else:
-        for k, v in slim.items():
-            sys.stderr.write(f"{k}: {v}\n")
+        from ..diagnosis.benchmark_report import format_scores
+        sys.stderr.write(format_scores(sc) + f"\nscores: {Path(args.out) / 'scores.json'} (per-case rows), "
+                                             f"{Path(args.out) / 'scores.md'}\n")
     return 0

@@ -312,5 +312,7 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
     from .cases import CaseMix
     sc.update(seed=seed, case_duration_s=duration_s, case_rate_Hz=rate_Hz, null_runs=n_null,
               mix=(mix or CaseMix()).as_dict())
+    from .benchmark_report import format_scores
     atomic_write_text(out / "scores.json", json.dumps(sc, indent=1, default=float) + "\n")
+    atomic_write_text(out / "scores.md", format_scores(sc))
     return sc

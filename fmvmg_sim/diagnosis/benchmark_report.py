@@ -1,0 +1,85 @@
+"""The benchmark's scores as a page a person reads: targets against measured values, tiers, misses by cause.
+
+Reads only the scores object of :func:`~.benchmark.score` (plus the run settings :func:`~.benchmark.run_benchmark`
+adds); knows nothing of how the cases were made or diagnosed.
+"""
+
+from __future__ import annotations
+
+#: The issue's targets: (score key, count key, comparison, target, label).
+TARGETS = (
+    ("false_alarm_rate", "null_cases", "<=", 0.05, "false alarms (null cases)"),
+    ("top1", "single_above", ">=", 0.90, "top-1, single effects above the limit"),
+    ("top2", "single_above", ">=", 0.98, "top-2, single effects above the limit"),
+    ("pairs_exact", "pair_cases", ">=", 0.70, "exact pairs"),
+    ("median_shrink", None, ">=", 0.80, "median held-out shrink when right"),
+)
+
+
+def _pct(v) -> str:
+    return "-" if v is None else f"{v:.3f}"
+
+
+def _count(v, n) -> str:
+    """``k of n`` from a rate and its denominator (rates are means of booleans)."""
+    if v is None or n is None:
+        return "-"
+    return f"{round(v * n)} of {n}"
+
+
+def format_scores(sc: dict) -> str:
+    """Markdown summary of benchmark scores.
+
+    Parameters
+    ----------
+    sc : dict
+        From :func:`~.benchmark.score` (``seed``, ``null_runs`` and ``mix`` are used when present).
+
+    Returns
+    -------
+    str
+    """
+    head = f"# Diagnosis benchmark: {sc['cases']} cases"
+    if "seed" in sc:
+        head += f", seed {sc['seed']}"
+    L = [head, ""]
+    if sc.get("errors"):
+        L += [f"**{sc['errors']} diagnoses failed** (scored as misses; their rows hold the error).", ""]
+    L += ["| score | measured | cases | target | met |", "|---|---|---|---|---|"]
+    for key, nkey, op, target, label in TARGETS:
+        v = sc.get(key)
+        n = sc.get(nkey) if nkey else None
+        met = "-" if v is None else ("yes" if (v <= target if op == "<=" else v >= target) else "no")
+        L.append(f"| {label} | {_pct(v)} | {_count(v, n) if nkey else '-'} | {op} {target:g} | {met} |")
+    L += ["", "| other score | measured | cases |", "|---|---|---|",
+          f"| exact pairs, both members above the limit | {_pct(sc.get('pairs_exact_above'))} | "
+          f"{_count(sc.get('pairs_exact_above'), sc.get('pair_cases_above'))} |",
+          f"| truth in the ambiguity set (above the limit) | {_pct(sc.get('truth_in_ambiguity_set'))} | - |",
+          f"| right, but a located gap left open | {_pct(sc.get('partial_when_right'))} | "
+          f"{_count(sc.get('partial_when_right'), sc.get('right_cases'))} |",
+          f"| median relative parameter error when right | {_pct(sc.get('param_rel_error_median'))} | - |"]
+    if sc.get("ool_cases"):
+        L += [f"| out of library: \"unexplained\" (above the limit) | {_pct(sc.get('ool_unexplained_rate_above'))} | "
+              f"{sc.get('ool_cases_above')} |",
+              f"| out of library: confidently mis-attributed (above) | {_pct(sc.get('ool_confident_rate_above'))} | "
+              f"{sc.get('ool_cases_above')} |"]
+    tiers = sc.get("by_tier") or {}
+    if tiers:
+        L += ["", "By SNR tier (a pair by its weaker member):", "",
+              "| tier | single cases | top-1 | top-2 | pair cases | exact pairs |", "|---|---|---|---|---|---|"]
+        for t in ("above", "near", "below"):
+            d = tiers.get(t) or {}
+            L.append(f"| {t} | {d.get('single_cases', 0)} | {_pct(d.get('top1'))} | {_pct(d.get('top2'))} | "
+                     f"{d.get('pair_cases', 0)} | {_pct(d.get('pairs_exact'))} |")
+    causes = sc.get("misses_by_cause") or {}
+    if causes:
+        from .benchmark import MISS_CAUSES
+        rows = {k: [causes.get(g, {}).get(k, 0) for g in ("single_above", "pairs_above", "pairs")] for k in MISS_CAUSES}
+        rows = {k: v for k, v in rows.items() if any(v)}
+        L += ["", "Why true effects were missed (each missing member of a missed case):", ""]
+        if rows:
+            L += ["| cause | single effects above | pairs above | pairs, all |", "|---|---|---|---|"]
+            L += [f"| {k}: {MISS_CAUSES[k]} | {v[0]} | {v[1]} | {v[2]} |" for k, v in rows.items()]
+        else:
+            L.append("No single effect above the limit and no pair member was missed.")
+    return "\n".join(L) + "\n"

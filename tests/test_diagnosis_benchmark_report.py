@@ -1,0 +1,42 @@
+"""The benchmark's readable summary: targets against measured values, counts, tiers and misses by cause."""
+
+from fmvmg_sim.diagnosis.benchmark import score
+from fmvmg_sim.diagnosis.benchmark_report import format_scores
+
+
+def _res(verdict, accepted=()):
+    return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted), "ambiguous_with": {},
+            "rows": {a: {"shrink": 0.9, "params": {}, "accepted": True, "folds_testable": 3, "why_not": []}
+                     for a in accepted}}
+
+
+def test_summary_reads_targets_counts_and_causes():
+    labs = [{"case": 0, "effects": {}, "tier": "null", "snr": 0.0},
+            {"case": 1, "effects": {}, "tier": "null", "snr": 0.0},
+            {"case": 2, "effects": {"thermal_lag": {}}, "tier": "above", "snr": 50.0},
+            {"case": 3, "effects": {"feedthrough": {}}, "tier": "above", "snr": 50.0},
+            {"case": 4, "effects": {"duffing": {}, "feedthrough": {}}, "tier": "above", "snr": 50.0}]
+    results = [_res("none"), _res("unexplained"), _res("explained", ["thermal_lag"]), _res("none"),
+               _res("explained", ["duffing", "feedthrough"])]
+    sc = dict(score(labs, results), seed=7)
+    md = format_scores(sc)
+    lines = md.splitlines()
+    assert lines[0] == "# Diagnosis benchmark: 5 cases, seed 7"
+    row = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in lines if ln.startswith("| ")}
+    # one false alarm of two nulls: 0.5, not met; top-1 one of two singles; the pair exact
+    assert row["false alarms (null cases)"] == ["0.500", "1 of 2", "<= 0.05", "no"]
+    assert row["top-1, single effects above the limit"] == ["0.500", "1 of 2", ">= 0.9", "no"]
+    assert row["exact pairs"] == ["1.000", "1 of 1", ">= 0.7", "yes"]
+    assert row["median held-out shrink when right"][0] == "0.900"
+    # the missed feedthrough (no row: never fitted) is counted under the acceptance criteria
+    crit = [v for k, v in row.items() if k.startswith("criteria")]
+    assert crit == [["1", "0", "0"]]
+    assert not any(k.startswith("look_alike") for k in row)  # causes with no miss are left out
+
+
+def test_summary_of_an_empty_selection_has_no_verdict():
+    sc = score([{"case": 0, "effects": {}, "tier": "null", "snr": 0.0}], [_res("none")])
+    md = format_scores(sc)
+    assert "| top-1, single effects above the limit | - | - | >= 0.9 | - |" in md
+    assert "| false alarms (null cases) | 0.000 | 0 of 1 | <= 0.05 | yes |" in md
+    assert "No single effect above the limit and no pair member was missed." in md
