@@ -263,19 +263,22 @@ class Scorer:
         info = sum(f["info_if_true"] for f in testable)
         return bool(total >= FOLDS_COMBINED_Z * np.sqrt(2.0 * info))
 
-    def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int) -> float:
-        """BIC(candidate) - BIC(base) on the training window (AR(1) likelihood).
+    def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int,
+                  rows: np.ndarray | None = None) -> float:
+        """BIC(candidate) - BIC(base) on the training window, or on ``rows`` (AR(1) likelihood).
 
         Parameters
         ----------
         pred_cand, pred_base : ndarray
         k_extra : int
+        rows : ndarray of bool, optional
+            Blocks to read (default the training window).
 
         Returns
         -------
         float
         """
-        rows = self.train
+        rows = self.train if rows is None else rows
         v = []
         for pred in (pred_cand, pred_base):
             Z = self.f.residual(pred, scoring=True)[rows]
@@ -513,6 +516,41 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                         pair_alternatives[swapped].append(alt)
     return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan,
             "pair_alternatives": pair_alternatives}
+
+
+def in_sample(scorer: Scorer, names: tuple = DETERMINISTIC, n_best: int = 3) -> list[dict]:
+    """Effects fitted on every block of the record, ranked by their in-sample Delta-BIC: a hint, not a test.
+
+    A gap that lies after the last training window (a hysteresis seen only on a record's last ramp) can be
+    located but not attributed: no training window holds it, so nothing can be scored held out. Fitting
+    each effect on the whole record, against the nominal model refitted there, says which one would close it
+    in-sample. It is reported apart from the attribution and never accepted.
+
+    Parameters
+    ----------
+    scorer : Scorer
+    names : tuple of str, optional
+    n_best : int, optional
+
+    Returns
+    -------
+    list of dict
+        ``{"effect", "params", "delta_bic", "param_z"}``, best first; only fits inside their physical bounds,
+        with a parameter :data:`PARAM_Z_MIN` standard errors from zero and Delta-BIC below :data:`DELTA_BIC_MAX`.
+    """
+    rows = np.isfinite(scorer.f.Y).any(axis=1)
+    base = scorer.cal.lin.predict(scorer.f.solve(scorer.cal.lin, rows).x)
+    out = []
+    for n in names:
+        try:
+            mf = EffectModel(scorer.f, scorer.cal, [n]).fit(rows)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            continue
+        dbic = scorer.delta_bic(mf._ctx["pred"], base, len(MODELS[n]), rows=rows)
+        z = param_z(mf, [n])
+        if dbic < DELTA_BIC_MAX and z > PARAM_Z_MIN and _in_bounds(mf.effects):
+            out.append({"effect": n, "params": mf.effects[n], "delta_bic": float(dbic), "param_z": float(z)})
+    return sorted(out, key=lambda r: r["delta_bic"])[:n_best]
 
 
 def reference_lacks_vref(params: dict, vref_V: float) -> bool:

@@ -18,7 +18,8 @@ from ..errors import InputError
 from ..record import Record, read_record
 from ..scenario import Scenario, load_scenario
 from . import localize as loc
-from .attribute import MIN_TRAIN_SPAN_K, Scorer, ambiguity, attribute, rejudge_second, separating_experiment
+from .attribute import (MIN_TRAIN_SPAN_K, Scorer, ambiguity, attribute, in_sample, rejudge_second,
+                        separating_experiment)
 from .calibrate import calibrate
 from .data import Prepared, prepare
 from .fitting import Fitter
@@ -410,6 +411,19 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         remainder = {"significant": [{"group": r["group"], "name": r["name"], "p_holm": r["p_holm_after"]}
                                      for r in sorted(closure["open"], key=lambda r: r["p_holm_after"])],
                      "partial": True, "explained_by": list(att["selected"])}
+    # a gap no accepted effect explains: which effect would close it in-sample (a hint for the next record, never
+    # an attribution: a gap after the last training window cannot be scored held out)
+    hint = None
+    if verdict == "unexplained" and not accepted:
+        cands = in_sample(scorer)
+        for c in cands:
+            # what the held-out scoring said of the same effect: a gap no training window holds cannot be tested
+            # there (no fold testable); one that was tested and failed is weaker evidence still
+            g = (att["single"].get(c["effect"]) or {}).get("gain") or {}
+            c["heldout"] = {"folds_testable": g.get("folds_testable"), "gain": g.get("gain"), "ci": g.get("ci")}
+        hint = {"note": "each effect fitted on the whole record against the nominal model refitted there; "
+                        "not validated on held-out data, so not an attribution",
+                "candidates": cands}
     ranked = rank_rows(ranked, accepted)
     lookalike_of = {o: a for a, others in amb.items() for o in others}
     for r in ranked:
@@ -432,7 +446,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     report = {
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
-        "closure": closure,
+        "closure": closure, "in_sample": hint,
         "primary_metric": primary, "combined": combined,
         "calibration": cal.to_json(),
         "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,
