@@ -293,10 +293,10 @@ segments = [
     assert ("channels", "quadrature_V") in names, names
     # fitted on the whole record (a hint, never accepted), the withheld hysteresis closes it best, with its
     # parameters (here 0.00503 and 7.13 K; in-sample Delta-BIC -8.7e5 against -8.1e5 for a quadrature drift)
-    best = rep["in_sample"]["candidates"][0]
-    assert best["effect"] == "thermal_hysteresis", rep["in_sample"]
+    best = rep["in_sample_candidates"]["candidates"][0]
+    assert best["effect"] == "thermal_hysteresis", rep["in_sample_candidates"]
     assert abs(best["params"]["quad_rel"] / 5e-3 - 1) < 0.1 and abs(best["params"]["width_K"] / 7.0 - 1) < 0.1
-    assert "not an attribution" in rep["in_sample"]["note"]
+    assert "not an attribution" in rep["in_sample_candidates"]["note"]
     from fmvmg_sim.diagnosis.report import write_report
     md = (write_report(rep, tmp_path / "rep") and (tmp_path / "rep" / "report.md").read_text())
     assert "## In-sample candidates (not an attribution)" in md and "- thermal_hysteresis: Delta-BIC" in md

@@ -446,7 +446,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     report = {
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
-        "closure": closure, "in_sample": hint,
+        "closure": closure, "in_sample_candidates": hint,
         "primary_metric": primary, "combined": combined,
         "calibration": cal.to_json(),
         "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,

@@ -74,7 +74,7 @@ def markdown(rep: dict) -> str:
             for s in rem["significant"][:8]:
                 L.append(f"- {s['group']} / {s['name']} (Holm p = {s['p_holm']:.2g})")
         L.append("")
-    hint = rep.get("in_sample")
+    hint = rep.get("in_sample_candidates")
     if hint:
         L += ["## In-sample candidates (not an attribution)", "",
               "Each effect fitted on the whole record, against the nominal model refitted there. No held-out data "
