@@ -40,6 +40,43 @@ def _fmt(v, spec=".4g"):
     return "-" if v is None else format(v, spec) if isinstance(v, (int, float)) else str(v)
 
 
+def in_sample_lines(hint: dict | None) -> list[str]:
+    """The report's section on in-sample candidates (empty without them).
+
+    Parameters
+    ----------
+    hint : dict or None
+        The report's ``in_sample_candidates``: ``note`` and ``candidates`` (each with ``effect``, ``params``,
+        ``delta_bic`` and ``heldout``: ``folds_testable``, ``gain``, ``ci``; JSON-clean, so any of them may be None).
+
+    Returns
+    -------
+    list of str
+    """
+    if not hint:
+        return []
+    L = ["## In-sample candidates (not an attribution)", "",
+         "Each effect fitted on the whole record, against the nominal model refitted there. No held-out data "
+         "checks these: the gap may lie where no training window reaches (the last held-out block). A record "
+         "that repeats the excursion, or runs past it, can test them. They say which effect to test next, not that one "
+         "acts: on simulated gaps from outside the library this list names a library effect in 31 of 42 cases.", ""]
+    for c in hint.get("candidates") or []:
+        h = c.get("heldout") or {}
+        if h.get("folds_testable") == 0:
+            held = "no held-out fold can test it"
+        elif h.get("folds_testable") is not None:
+            ci = h.get("ci") or [None, None]
+            held = (f"tested held out, not accepted (gain {_fmt(h.get('gain'), '.3g')} per block, interval "
+                    f"[{_fmt(ci[0], '.3g')}, {_fmt(ci[1], '.3g')}])")
+        else:
+            held = "not scored held out"
+        L.append(f"- {c['effect']}: Delta-BIC {_fmt(c.get('delta_bic'), '.1f')}, parameters "
+                 + ", ".join(f"{k} = {_fmt(v, '.4g')}" for k, v in (c.get("params") or {}).items()) + f"; {held}")
+    if not hint.get("candidates"):
+        L.append("- none: no library effect closes the gap in-sample either.")
+    return L + [""]
+
+
 def markdown(rep: dict) -> str:
     """A report a person reads.
 
@@ -74,29 +111,7 @@ def markdown(rep: dict) -> str:
             for s in rem["significant"][:8]:
                 L.append(f"- {s['group']} / {s['name']} (Holm p = {s['p_holm']:.2g})")
         L.append("")
-    hint = rep.get("in_sample_candidates")
-    if hint:
-        L += ["## In-sample candidates (not an attribution)", "",
-              "Each effect fitted on the whole record, against the nominal model refitted there. No held-out data "
-              "checks these: the gap may lie where no training window reaches (the last held-out block). A record "
-              "that repeats the excursion, or runs past it, can test them. They say which effect to test next, not that one "
-              "acts: on simulated gaps from outside the library this list names a library effect in 31 of 42 cases.",
-              ""]
-        if hint["candidates"]:
-            for c in hint["candidates"]:
-                h = c.get("heldout") or {}
-                if h.get("folds_testable") == 0:
-                    held = "no held-out fold can test it"
-                elif h.get("ci"):
-                    held = (f"tested held out, not accepted (gain {h['gain']:.3g} per block, interval "
-                            f"[{h['ci'][0]:.3g}, {h['ci'][1]:.3g}])")
-                else:
-                    held = "not scored held out"
-                L.append(f"- {c['effect']}: Delta-BIC {c['delta_bic']:.1f}, parameters "
-                         + ", ".join(f"{k} = {v:.4g}" for k, v in c["params"].items()) + f"; {held}")
-        else:
-            L.append("- none: no library effect closes the gap in-sample either.")
-        L.append("")
+    L += in_sample_lines(rep.get("in_sample_candidates"))
     r = rep["record"]
     L += ["## Record", "", f"{r['samples']} samples, {r['duration_s'] / 3600:.2f} h at {r['sample_interval_s']:.3g} s; "
           f"channels: {', '.join(r['channels'])}.", ""]

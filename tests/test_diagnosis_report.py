@@ -1,0 +1,25 @@
+"""The diagnosis report's Markdown sections."""
+
+from fmvmg_sim.diagnosis.report import in_sample_lines
+
+
+def test_in_sample_section_reads_each_held_out_outcome_and_missing_numbers():
+    hint = {"note": "not an attribution", "candidates": [
+        {"effect": "thermal_hysteresis", "params": {"quad_rel": 0.000466, "width_K": 6.44}, "delta_bic": -6104.4,
+         "heldout": {"folds_testable": 0, "gain": 0.0, "ci": [0.0, 0.0]}},
+        {"effect": "quadrature_drift", "params": {"beta_per_K": 2.6e-05}, "delta_bic": -5431.3,
+         "heldout": {"folds_testable": 1, "gain": -12.5, "ci": [-64312.9, 0.0]}},
+        # a held-out fit that failed: JSON-clean infinities are None
+        {"effect": "duffing", "params": {"k3_rel": None}, "delta_bic": -20.0,
+         "heldout": {"folds_testable": 2, "gain": None, "ci": [None, None]}},
+        {"effect": "feedthrough", "params": {"c_ft_fF": 0.04}, "delta_bic": -15.0, "heldout": {}}]}
+    L = in_sample_lines(hint)
+    assert L[0] == "## In-sample candidates (not an attribution)"
+    rows = [ln for ln in L if ln.startswith("- ")]
+    assert rows[0] == ("- thermal_hysteresis: Delta-BIC -6104.4, parameters quad_rel = 0.000466, width_K = 6.44; "
+                       "no held-out fold can test it")
+    assert rows[1].endswith("tested held out, not accepted (gain -12.5 per block, interval [-6.43e+04, 0])")
+    assert rows[2].endswith("k3_rel = -; tested held out, not accepted (gain - per block, interval [-, -])")
+    assert rows[3].endswith("not scored held out")
+    assert in_sample_lines(None) == []
+    assert "- none: no library effect closes the gap in-sample either." in in_sample_lines({"candidates": []})
