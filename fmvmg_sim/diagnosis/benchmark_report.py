@@ -6,6 +6,8 @@ adds); knows nothing of how the cases were made or diagnosed.
 
 from __future__ import annotations
 
+from .benchmark import MISS_CAUSES
+
 #: The issue's targets: (score key, count key, comparison, target, label).
 TARGETS = (
     ("false_alarm_rate", "null_cases", "<=", 0.05, "false alarms (null cases)"),
@@ -73,7 +75,6 @@ def format_scores(sc: dict) -> str:
                      f"{d.get('pair_cases', 0)} | {_pct(d.get('pairs_exact'))} |")
     causes = sc.get("misses_by_cause") or {}
     if causes:
-        from .benchmark import MISS_CAUSES
         rows = {k: [causes.get(g, {}).get(k, 0) for g in ("single_above", "pairs_above", "pairs")] for k in MISS_CAUSES}
         rows = {k: v for k, v in rows.items() if any(v)}
         L += ["", "Why true effects were missed (each missing member of a missed case):", ""]
