@@ -5,6 +5,7 @@ import contextlib
 import numpy as np
 
 from fmvmg_sim.diagnosis.attribute import _in_bounds, _significant_param, ambiguity, param_z, separating_experiment
+from tests.test_diagnosis_helpers import REPO
 
 
 def _ev(gain, lo, inb=True, fit=True):
@@ -343,3 +344,29 @@ def test_pair_from_scratch_swaps_in_the_q_drift_and_refuses_q_with_rectifier(mon
     assert sorted(att["selected"]) == sorted([Q, S])
     assert att["pair_scan"]["+".join(sorted((Q, R)))]["same_signature"]
     assert att["pair_alternatives"] == {Q: [R]}          # R beside S is the look-alike; Q beside R is not
+
+
+def test_temperature_driven_effects_are_constant_on_a_hold():
+    """On the forward model each effect of TEMPERATURE_DRIVEN, at the middle of its prior range, leaves a record
+    held at one temperature unchanged in time (a constant offset at most), while a ramp moves it; a stress
+    relaxation moves a hold too (it acts through time), so it is left out."""
+    from fmvmg_sim.diagnosis.attribute import DETERMINISTIC, TEMPERATURE_DRIVEN
+    from fmvmg_sim.diagnosis.forward import CHANNELS, predict_device
+    from fmvmg_sim.effects import validate_effects
+    from fmvmg_sim.scenario import load_scenario
+    dev = load_scenario(REPO / "scenarios" / "nominal_a.toml").device_nominal
+    t = np.arange(0.0, 20000.0, 200.0)
+    hold, ramp = np.full_like(t, 25.0), 25.0 + 40.0 * t / t[-1]
+
+    def moves(eff, T):  # peak-to-peak over time of the signature, per channel
+        a, b = predict_device(dev, eff, t, T), predict_device(dev, {}, t, T)
+        return np.ptp(np.stack([a[c] - b[c] for c in CHANNELS], axis=1), axis=0)
+    assert set(TEMPERATURE_DRIVEN) == set(DETERMINISTIC) - {"stress_relaxation"}
+    for n in DETERMINISTIC:
+        eff = validate_effects({n: {}}, n)
+        on_hold, on_ramp = moves(eff, hold), moves(eff, ramp)
+        assert on_ramp.max() > 0, n
+        if n in TEMPERATURE_DRIVEN:
+            assert np.all(on_hold <= 1e-9 * np.maximum(on_ramp, 1e-300)), (n, on_hold, on_ramp)
+        else:
+            assert np.max(on_hold / np.maximum(on_ramp, 1e-300)) > 0.1, (n, on_hold, on_ramp)

@@ -124,7 +124,8 @@ def test_misses_are_counted_by_cause():
             lab(3, ["q_factor_drift", "thermal_lag"], {"q_factor_drift": 35.0, "thermal_lag": 59000.0}),
             lab(4, ["feedthrough"]),
             lab(5, ["duffing"]),
-            lab(6, ["duffing", "reference_drift"], {"duffing": 40.0, "reference_drift": 60.0})]
+            lab(6, ["duffing", "reference_drift"], {"duffing": 40.0, "reference_drift": 60.0}),
+            lab(7, ["q_factor_drift", "quadrature_drift"])]
     results = [res("explained", ["quantization"]),
                res("none", rows={"thermal_hysteresis": dict(nope, folds_testable=0)}),
                res("ambiguous", ["quadrature_drift"], {"quadrature_drift": ["mode_split_drift"]},
@@ -132,13 +133,17 @@ def test_misses_are_counted_by_cause():
                res("explained", ["thermal_lag"], rows={"q_factor_drift": nope}),
                res("none", rows={"feedthrough": nope}),
                res("explained", ["duffing"]),
-               res("explained", ["reference_drift"], rows={"duffing": nope})]
+               res("explained", ["reference_drift"], rows={"duffing": nope}),
+               # a record whose training windows hold one temperature (its design, read from the record)
+               dict(res("unexplained", rows={"q_factor_drift": nope, "quadrature_drift": nope}),
+                    design={"not_identifiable": ["q_factor_drift", "quadrature_drift"]})]
     sc = score(labs, results)
     miss = [r.get("miss") for r in sc["rows"]]
     assert miss == [{"flicker_noise": "hidden_by_converter"}, {"thermal_hysteresis": "no_heldout_test"},
                     {"mode_split_drift": "look_alike"}, {"q_factor_drift": "beside_stronger"},
-                    {"feedthrough": "criteria"}, None, {"duffing": "criteria"}]
+                    {"feedthrough": "criteria"}, None, {"duffing": "criteria"},
+                    {"q_factor_drift": "one_temperature", "quadrature_drift": "one_temperature"}]
     assert set(sc["misses_by_cause"]["single_above"]) == set(MISS_CAUSES)
     assert sc["misses_by_cause"]["single_above"]["no_heldout_test"] == 1
     assert sc["misses_by_cause"]["pairs"] == dict({k: 0 for k in MISS_CAUSES}, hidden_by_converter=1,
-                                                  beside_stronger=1, criteria=1)
+                                                  beside_stronger=1, criteria=1, one_temperature=2)

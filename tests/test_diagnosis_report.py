@@ -23,3 +23,18 @@ def test_in_sample_section_reads_each_held_out_outcome_and_missing_numbers():
     assert rows[3].endswith("not scored held out")
     assert in_sample_lines(None) == []
     assert "- none: no library effect closes the gap in-sample either." in in_sample_lines({"candidates": []})
+
+
+def test_record_section_names_what_a_one_temperature_record_cannot_identify():
+    from fmvmg_sim.diagnosis.pipeline import design_check
+    from fmvmg_sim.diagnosis.report import _coverage_lines
+    folds = [{"train_C": [31.9, 31.9], "test_C": [31.9, 31.9], "train_blocks": 389, "test_blocks": 216,
+              "test_outside_fraction": 0.0, "test_start_s": 4320.0}]
+    rec = {"folds": folds}
+    text = "\n".join(_coverage_lines(rec, {"min_train_span_K": 5.0}, design_check({"folds": folds})))
+    assert "No fold's training window spans 5 K" in text and "well before 4320 s" in text
+    assert "Not identifiable from this record: thermal_lag, " in text and "reference_drift." in text
+    # a record that ramps in training gets neither paragraph
+    folds[0]["train_C"] = [20.0, 40.0]
+    text = "\n".join(_coverage_lines(rec, {"min_train_span_K": 5.0}, design_check({"folds": folds})))
+    assert "Not identifiable" not in text and "No fold's training window" not in text

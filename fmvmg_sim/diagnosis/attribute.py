@@ -69,6 +69,10 @@ SECOND_EFFECT_REL_FLOOR = 0.01
 #: Temperature span (K) a fold's training window needs to be scored.
 MIN_TRAIN_SPAN_K = 5.0
 DETERMINISTIC = tuple(e for e in MODELS if e in DEVICE_EFFECTS or e in PATH_EFFECTS)
+#: Effects that change the output only through a change of temperature: on a record held at one temperature each
+#: is at most a constant offset (tested on the forward model), which the nominal knobs absorb unless it exceeds the
+#: unit's tolerances, and its temperature law is not determined. A stress relaxation acts through time.
+TEMPERATURE_DRIVEN = tuple(e for e in DETERMINISTIC if e != "stress_relaxation")
 
 #: What separates look-alike effects (physics brief section 4, diagnosis methods 2.2 step 8).
 SEPARATING = {

@@ -54,7 +54,7 @@ def _diagnose_case(record: str, scenario: str, n_null: int, out_dir: str) -> dic
             "rows": {r["effect"]: {"params": r.get("params"), "shrink": r.get("shrink"), "accepted": r["accepted"],
                                    "folds_testable": r.get("folds_testable"), "why_not": r.get("why_not")}
                      for r in cj["ranked"]},
-            "combined": cj.get("combined"), "wall_time_s": cj["wall_time_s"]}
+            "combined": cj.get("combined"), "design": cj.get("design"), "wall_time_s": cj["wall_time_s"]}
 
 
 def _make(k, seed, out, scenario, duration_s, rate_Hz, mix=None):
@@ -97,6 +97,8 @@ def param_errors(effect: str, truth: dict, est: dict) -> list[float]:
 
 #: Why a true effect was missed, in the order :func:`miss_cause` tests them.
 MISS_CAUSES = {
+    "one_temperature": "the record's training windows never leave one temperature: an effect that acts only "
+                       "through a temperature change is not identifiable there (the design-unidentifiable case)",
     "hidden_by_converter": "extra flicker beside a coarser converter (not judged there; in the benchmark's cases its "
                            "wander lies far below one converter step)",
     "no_heldout_test": "no held-out fold can test the effect as fitted (its prediction moves no fold by the nats a "
@@ -108,7 +110,8 @@ MISS_CAUSES = {
 }
 
 
-def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: dict, snr_by: dict) -> str:
+def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: dict, snr_by: dict,
+               not_identifiable: list | tuple = ()) -> str:
     """Why a true effect is missing from (or not first in) the accepted set: a key of :data:`MISS_CAUSES`.
 
     Parameters
@@ -122,6 +125,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
         The diagnosis' rows by effect (``folds_testable``, ``why_not``).
     snr_by : dict
         The label's SNR by effect.
+    not_identifiable : list of str, optional
+        Effects the record's design cannot identify (the report's ``design``, read from the record alone).
 
     Returns
     -------
@@ -129,6 +134,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
     """
     if effect in accepted:
         return "ranked_second"
+    if effect in not_identifiable:
+        return "one_temperature"
     if effect == "flicker_noise" and "quantization" in truth:
         return "hidden_by_converter"
     row = rows.get(effect) or {}
@@ -188,7 +195,8 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             r["partial"] = partial
             missed = (len(truth) == 1 and not r["top1"]) or (len(truth) == 2 and not r["pair_exact"])
             if missed and not err:
-                r["miss"] = {t: miss_cause(t, truth, acc, amb, res.get("rows") or {}, lab.get("snr_by_effect") or {})
+                r["miss"] = {t: miss_cause(t, truth, acc, amb, res.get("rows") or {}, lab.get("snr_by_effect") or {},
+                                         (res.get("design") or {}).get("not_identifiable") or ())
                              for t in truth if not (len(truth) == 2 and t in acc)}
         right = [t for t in truth if t in acc]
         if right and not err:

@@ -18,8 +18,8 @@ from ..errors import InputError
 from ..record import Record, read_record
 from ..scenario import Scenario, load_scenario
 from . import localize as loc
-from .attribute import (MIN_TRAIN_SPAN_K, Scorer, ambiguity, attribute, in_sample, rejudge_second,
-                        separating_experiment)
+from .attribute import (MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, Scorer, ambiguity, attribute, in_sample,
+                        rejudge_second, separating_experiment)
 from .calibrate import calibrate
 from .data import Prepared, prepare
 from .fitting import Fitter
@@ -183,6 +183,35 @@ def posterior_draws(cal, n: int, seed: int) -> list[dict]:
 def _rate_residual(prep: Prepared, pred_b: np.ndarray, rate_V: np.ndarray) -> np.ndarray:
     tb = prep.block_time_s()
     return (rate_V - np.interp(prep.t_mid_s, tb, pred_b[:, IRATE])) / prep.sf_nominal_V_per_dps
+
+
+def design_check(cover: dict, min_span_K: float = MIN_TRAIN_SPAN_K) -> dict:
+    """What the record's temperature design lets the diagnosis identify.
+
+    A temperature law is fitted on a training window; a window that never leaves one temperature does not
+    determine it, and a held-out test then scores an arbitrary extrapolation. When no fold's training window
+    spans ``min_span_K``, the effects that act only through a temperature change
+    (:data:`~.attribute.TEMPERATURE_DRIVEN`) cannot be identified from the record beyond a constant offset (the
+    design-unidentifiable case of the diagnosis methods, section 3); a stress relaxation, extra flicker and a
+    coarser converter can.
+
+    Parameters
+    ----------
+    cover : dict
+        :meth:`~.data.Prepared.temperature_coverage`.
+    min_span_K : float, optional
+
+    Returns
+    -------
+    dict
+        ``train_span_K`` (the widest fold's training span), ``min_train_span_K``,
+        ``temperature_laws_identifiable`` and ``not_identifiable`` (effect names; empty when identifiable).
+    """
+    spans = [f["train_C"][1] - f["train_C"][0] if f.get("train_C") else 0.0 for f in cover["folds"]]
+    span = float(max(spans, default=0.0))
+    ok = span >= min_span_K
+    return {"train_span_K": span, "min_train_span_K": float(min_span_K), "temperature_laws_identifiable": ok,
+            "not_identifiable": [] if ok else list(TEMPERATURE_DRIVEN)}
 
 
 def rank_rows(rows: list[dict], accepted: list[str]) -> list[dict]:
@@ -443,10 +472,14 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         elif not r.get("why_not"):
             r["why_not"] = ["passes alone; another effect explains the gap better"]
     cover = prep.temperature_coverage()
+    design = design_check(cover)
+    for r in ranked:
+        if not r["accepted"] and r["effect"] in design["not_identifiable"]:
+            r["why_not"] = ["not identifiable here: no training window leaves one temperature"] + r["why_not"]
     report = {
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
-        "closure": closure, "in_sample_candidates": hint,
+        "closure": closure, "in_sample_candidates": hint, "design": design,
         "primary_metric": primary, "combined": combined,
         "calibration": cal.to_json(),
         "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,

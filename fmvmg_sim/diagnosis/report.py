@@ -115,7 +115,7 @@ def markdown(rep: dict) -> str:
     r = rep["record"]
     L += ["## Record", "", f"{r['samples']} samples, {r['duration_s'] / 3600:.2f} h at {r['sample_interval_s']:.3g} s; "
           f"channels: {', '.join(r['channels'])}.", ""]
-    L += _coverage_lines(r, rep.get("settings", {}))
+    L += _coverage_lines(r, rep.get("settings", {}), rep.get("design"))
     iss = r["issues"]
     if iss.get("gaps") or iss.get("nan_samples"):
         L.append(f"Gaps: {len(iss.get('gaps', []))} ({iss.get('gap_total_s', 0):.0f} s missing); "
@@ -156,8 +156,9 @@ def markdown(rep: dict) -> str:
     return "\n".join(L)
 
 
-def _coverage_lines(r: dict, settings: dict) -> list[str]:
-    """The folds' training and held-out temperatures, and where the held-out data extrapolate."""
+def _coverage_lines(r: dict, settings: dict, design: dict | None = None) -> list[str]:
+    """The folds' training and held-out temperatures, where the held-out data extrapolate, and what a record
+    held at one temperature cannot identify (``design``, :func:`~.pipeline.design_check`)."""
     folds = r.get("folds") or []
     if not folds or "train_C" not in folds[0]:
         return []
@@ -177,6 +178,11 @@ def _coverage_lines(r: dict, settings: dict) -> list[str]:
         L += ["", f"No fold's training window spans {span_K:g} K: no temperature effect can be identified on this "
               f"record. Change the temperature by at least {span_K:g} K well before {folds[0]['test_start_s']:.0f} s, "
               "where the held-out blocks begin."]
+        if design and design.get("not_identifiable"):
+            L += ["", f"Not identifiable from this record: {', '.join(design['not_identifiable'])}. Each acts only "
+                  "through a temperature change: held at one temperature it is at most a constant offset, which the "
+                  "nominal calibration absorbs unless it exceeds the unit's tolerances. A stress relaxation, extra "
+                  "flicker and a coarser converter can still be identified."]
     return L + [""]
 
 
