@@ -370,3 +370,55 @@ def test_temperature_driven_effects_are_constant_on_a_hold():
             assert np.all(on_hold <= 1e-9 * np.maximum(on_ramp, 1e-300)), (n, on_hold, on_ramp)
         else:
             assert np.max(on_hold / np.maximum(on_ramp, 1e-300)) > 0.1, (n, on_hold, on_ramp)
+
+
+def _scorer_stub(Y, S, folds):
+    """A :class:`Scorer` on given blocks, white unit-variance noise model, no fitter behind it."""
+    from types import SimpleNamespace
+
+    from fmvmg_sim.diagnosis.attribute import Scorer
+    from fmvmg_sim.diagnosis.fitting import Fitter
+
+    f = SimpleNamespace(Y=Y, S=S, S_score=S, present=np.ones(Y.shape[1], bool))
+    f.residual = lambda pred, scoring=False, Y=None: Fitter.residual(f, pred, scoring, Y)
+    sc = Scorer.__new__(Scorer)
+    sc.f, sc.folds, sc.noise_params = f, folds, [(0.0, 1.0)] * Y.shape[1]
+    return sc
+
+
+def test_a_fold_whose_candidate_refit_is_undetermined_cannot_test_it():
+    """Three folds; the candidate is right on two and, on the first, 30 sigma off where its refit's prediction
+    is uncertain by 50 sigma (a knob its parameter makes collinear on that short window). That fold is flagged
+    from the refit's covariance, left out of the pooled interval and counted neither passed nor testable;
+    the two others decide. Scored exactly, the first fold would sink the pooled interval."""
+    from fmvmg_sim.diagnosis.attribute import INDETERMINATE_SD
+    from fmvmg_sim.diagnosis.fitting import Lin
+
+    n, m = 120, 30
+    folds = [{"train": np.arange(n) < 30 + 30 * k, "test": (np.arange(n) >= 30 + 30 * k) & (np.arange(n) < 60 + 30 * k)}
+             for k in range(3)]
+    rng = np.random.default_rng(2)
+    truth = np.where(np.arange(n) >= 30, 3.0, 0.0)[:, None]       # an effect: 3 sigma on every held-out block
+    Y = truth + rng.standard_normal((n, 1))
+    sc = _scorer_stub(Y, np.ones((n, 1)), folds)
+    base = {"folds": [(np.zeros((n, 1)), {}) for _ in folds]}
+    lin = Lin(np.zeros((n, 1)), np.ones((n, 1, 1)), ["k"], np.zeros(1), np.array([np.nan]), np.array([-1e3]),
+              np.array([1e3]))
+
+    def refit(k):
+        wild = k == 0
+        pred = truth + (30.0 if wild else 0.0)
+        return pred, {}, (lin, np.array([[(5 * INDETERMINATE_SD) ** 2 if wild else 0.01]]))
+    calls = iter(range(3))
+    cand = sc.fold_predictions(lambda rows: refit(next(calls)))
+    assert [fo[2] for fo in cand["folds"]] == [False, True, True]
+    g = sc.gain(cand, base)
+    assert [f["used"] for f in g["folds"]] == [False, True, True]
+    assert g["folds"][0]["total"] < -1e4 and not g["folds"][0]["passed"] and not g["folds"][0]["testable"]
+    assert g["folds_passed"] == 2 and g["ci"][0] > 3.0             # 4.5 nats per block expected
+    exact = sc.gain({"folds": [(p, e) for p, e, _ in cand["folds"]]}, base)
+    assert exact["ci"][0] < 0 and exact["folds_passed"] == 2
+    # when every fold is undetermined, none is left out
+    calls = iter([0, 0, 0])
+    allwild = sc.gain(sc.fold_predictions(lambda rows: refit(next(calls))), base)
+    assert all(f["used"] for f in allwild["folds"]) and allwild["ci"][1] < 0

@@ -92,3 +92,28 @@ def test_covariance_scales_each_channel_by_its_own_misfit():
     assert np.isclose(sd[0], np.sqrt(red[0]) * sigma / np.sqrt(n), rtol=1e-6)
     assert np.isclose(sd[1], np.sqrt(max(red[1], 1.0)) * sigma / np.sqrt(n), rtol=1e-6)
     assert np.allclose(np.sqrt(np.diag(sol.cov_noise)), sigma / np.sqrt(n), rtol=1e-6)  # the noise model alone
+
+
+def test_prediction_sd_is_the_regression_band():
+    """``Lin.predict_sd`` of a straight line fitted on t in [0, 1] is the textbook sd of the fitted mean,
+    sigma sqrt(1/n + (t - mean t)^2 / Sxx): small inside the data, growing where the fit extrapolates (t = 3)."""
+    from types import SimpleNamespace
+
+    from fmvmg_sim.diagnosis.fitting import Lin
+    n, sigma = 200, 0.05
+    t = np.concatenate([np.linspace(0.0, 1.0, n), [3.0]])
+    cols = np.zeros((n + 1, 1, 2))
+    cols[:, 0, 0] = 1.0
+    cols[:, 0, 1] = t
+    rng = np.random.default_rng(11)
+    y = (0.4 - 0.7 * t + sigma * rng.standard_normal(n + 1))[:, None]
+    f = SimpleNamespace(S=np.full((n + 1, 1), sigma), Y=y, present=np.array([True]))
+    lin = Lin(np.zeros((n + 1, 1)), cols, ["a", "b"], np.zeros(2), np.array([np.nan, np.nan]),
+              np.array([-10.0, -10.0]), np.array([10.0, 10.0]))
+    train = np.arange(n + 1) < n                       # the point at t = 3 is held out
+    sol = Fitter.solve(f, lin, train)
+    sd = lin.predict_sd(sol.param_cov(), np.ones(n + 1, bool))[:, 0]
+    tt = t[:n]
+    band = sigma * np.sqrt(1.0 / n + (t - tt.mean()) ** 2 / np.sum((tt - tt.mean()) ** 2))
+    assert np.allclose(sd, band, rtol=1e-6)
+    assert sd[-1] > 5 * sd[n // 2]                     # extrapolating to t = 3 is far less certain

@@ -38,3 +38,9 @@ def test_record_section_names_what_a_one_temperature_record_cannot_identify():
     folds[0]["train_C"] = [20.0, 40.0]
     text = "\n".join(_coverage_lines(rec, {"min_train_span_K": 5.0}, design_check({"folds": folds})))
     assert "Not identifiable" not in text and "No fold's training window" not in text
+
+
+def test_undetermined_folds_are_named_beside_the_fold_counts():
+    from fmvmg_sim.diagnosis.report import _undetermined
+    assert _undetermined({"folds_undetermined": 1}) == " (1 undetermined)"
+    assert _undetermined({"folds_undetermined": 0}) == "" and _undetermined({}) == ""

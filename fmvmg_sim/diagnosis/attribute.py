@@ -13,7 +13,8 @@ accepted when
   deviations above zero. A fold can test a candidate when the candidate, were it true,
   would gain at least :data:`FOLD_INFO_NATS` there (its held-out blocks carry its signature: a ramp-rate
   term cannot be tested on a hold, nor a weak second effect on blocks where the first one's model error
-  hides it);
+  hides it). Nor can a fold whose refit of the candidate leaves its held-out prediction undetermined
+  (:data:`INDETERMINATE_SD`): that fold is left out of the pooled interval as well;
 * Delta-BIC on the training window is below -10;
 * its parameters lie inside their physical bounds (not pinned at a bound);
 * at least one of its linear parameters is more than 2 noise-model standard errors from "no effect" (with the
@@ -66,6 +67,13 @@ FOLDS_COMBINED_Z = 2.0
 PAIR_STARTS = 2
 #: Relative accuracy of an accepted effect's model (a floor on the scoring sigma of a second effect).
 SECOND_EFFECT_REL_FLOOR = 0.01
+#: A fold cannot test a candidate whose refit there leaves the held-out prediction undetermined: the 90th
+#: percentile over its held-out blocks of the prediction's sd (noise-model parameter covariance) above this many
+#: scoring sigmas in any channel. A knob the candidate's extra parameter makes collinear on a short window (a
+#: hysteresis state near +1 all along a heating ramp beside the quadrature knob) then slides along a valley the
+#: window cannot see, and the fold scores one arbitrary point of it (41421/1: 106 sigma; the folds that decide
+#: true and false candidates alike stay below 0.5).
+INDETERMINATE_SD = 10.0
 #: Temperature span (K) a fold's training window needs to be scored.
 MIN_TRAIN_SPAN_K = 5.0
 DETERMINISTIC = tuple(e for e in MODELS if e in DEVICE_EFFECTS or e in PATH_EFFECTS)
@@ -156,17 +164,26 @@ class Scorer:
         Parameters
         ----------
         refit : callable
-            ``rows -> (pred, effects)``.
+            ``rows -> (pred, effects)`` or ``rows -> (pred, effects, (lin, cov))``, ``lin`` the refit's
+            linearisation and ``cov`` its parameter covariance.
 
         Returns
         -------
         dict
-            ``folds``: list of (pred, effects); ``heldout``: stitched block prediction (NaN outside tests).
+            ``folds``: list of (pred, effects, determinate); ``determinate`` is False when the refit leaves
+            its held-out prediction undetermined (:data:`INDETERMINATE_SD`), None when unknown;
+            ``heldout``: stitched block prediction (NaN outside tests).
         """
         out, ho = [], np.full_like(self.f.Y, np.nan)
         for fd in self.folds:
-            pred, eff = refit(fd["train"])
-            out.append((pred, eff))
+            pred, eff, *unc = refit(fd["train"])
+            det = None
+            if unc:
+                lin, cov = unc[0]
+                ratio = lin.predict_sd(cov, fd["test"]) / self.f.S_score[fd["test"]]
+                ratio[:, ~self.f.present] = 0.0
+                det = bool(np.all(np.nanpercentile(ratio, 90, axis=0) <= INDETERMINATE_SD)) if len(ratio) else True
+            out.append((pred, eff, det))
             ho[fd["test"]] = pred[fd["test"]]
         return {"folds": out, "heldout": ho}
 
@@ -197,8 +214,8 @@ class Scorer:
         Returns
         -------
         dict
-            ``gain``, ``ci``, ``folds`` (per fold: gain, interval, total, ``info_if_true``, ``testable``,
-            ``consistent``, ``passed``),
+            ``gain``, ``ci``, ``folds`` (per fold: gain, interval, total, ``info_if_true``, ``determinate``,
+            ``used``, ``testable``, ``consistent``, ``passed``),
             ``folds_passed``, ``folds_testable``, ``by_channel``.
         """
         allv, folds, by_ch = [], [], []
@@ -217,15 +234,21 @@ class Scorer:
             tot = float(np.sum(diff))
             # were the candidate true, the fold's gain would scatter about ``info`` by sqrt(2 info)
             consistent = abs(tot - info) <= 3.0 * np.sqrt(2.0 * info) + FOLD_CONSISTENCY_REL * info
+            det = cand["folds"][k][2] if len(cand["folds"][k]) > 2 else None
             folds.append({"gain": float(np.mean(diff)), "ci": [lo, hi], "total": tot,
-                          "info_if_true": info, "testable": bool(info >= FOLD_INFO_NATS),
+                          "info_if_true": info, "determinate": det is not False,
                           "consistent": bool(consistent)})
             allv.append(diff)
-        pooled = np.concatenate(allv)
+        # a fold whose candidate refit leaves its held-out prediction undetermined tests one arbitrary point
+        # of a valley, not the candidate: it is left out (unless every fold is)
+        use = [k for k, f in enumerate(folds) if f["determinate"]] or list(range(len(folds)))
+        pooled = np.concatenate([allv[k] for k in use])
         lo, hi = block_bootstrap_ci(pooled, seed=99)
-        ch = np.concatenate(by_ch).mean(axis=0)
-        for f in folds:
-            f["passed"] = bool(f["ci"][0] > 0 and f["total"] >= FOLD_MIN_NATS)
+        ch = np.concatenate([by_ch[k] for k in use]).mean(axis=0)
+        for k, f in enumerate(folds):
+            f["used"] = k in use
+            f["testable"] = bool(f["info_if_true"] >= FOLD_INFO_NATS and f["used"])
+            f["passed"] = bool(f["ci"][0] > 0 and f["total"] >= FOLD_MIN_NATS and f["used"])
         return {"gain": float(np.mean(pooled)), "ci": [lo, hi], "folds": folds,
                 "folds_passed": int(sum(f["passed"] for f in folds)),
                 "folds_testable": int(sum(f["testable"] for f in folds)),

@@ -67,6 +67,23 @@ class Lin:
         """
         return self.y0 + self.cols @ (np.asarray(x) - self.x0)
 
+    def predict_sd(self, cov: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Standard deviation of the block predictions on ``rows`` under a parameter covariance ``cov``.
+
+        Parameters
+        ----------
+        cov : ndarray, shape (K, K)
+        rows : ndarray of bool
+
+        Returns
+        -------
+        ndarray, shape (m, C)
+            ``sqrt(diag(J cov J^T))``; zero where a sensitivity is not finite (an absent channel).
+        """
+        J = np.nan_to_num(self.cols[rows])
+        var = np.einsum("nck,kl,ncl->nc", J, np.nan_to_num(cov), J, optimize=True)
+        return np.sqrt(np.clip(var, 0.0, None))
+
 
 @dataclass
 class Solution:
@@ -92,6 +109,15 @@ class Solution:
     cost: float
     n: int
     cov_noise: np.ndarray | None = None
+
+    def param_cov(self) -> np.ndarray:
+        """The covariance under the noise model (:attr:`cov_noise`) when known, else :attr:`cov`.
+
+        Returns
+        -------
+        ndarray
+        """
+        return self.cov if self.cov_noise is None else self.cov_noise
 
 
 class Fitter:

@@ -99,8 +99,9 @@ class ModelFit:
     sd_noise: dict = field(default_factory=dict)
     _ctx: dict = field(default_factory=dict, repr=False)
 
-    def refit(self, rows: np.ndarray) -> tuple[np.ndarray, dict]:
-        """Refit on other blocks (same tables): returns block predictions and the effects.
+    def refit(self, rows: np.ndarray) -> tuple[np.ndarray, dict, tuple]:
+        """Refit on other blocks (same tables): returns block predictions, the effects and the refit's
+        linearisation with its parameter covariance under the noise model.
 
         Parameters
         ----------
@@ -110,6 +111,8 @@ class ModelFit:
         -------
         pred : ndarray, shape (n, C)
         effects : dict
+        uncertainty : tuple
+            ``(Lin, covariance)``.
         """
         return self._ctx["refit"](rows)
 
@@ -299,7 +302,7 @@ class EffectModel:
 
         def refit(r):
             nl2, lin2, sol2 = self._search(r)
-            return lin2.predict(sol2.x), self._unpack(lin2, sol2.x, nl2)[1]
+            return lin2.predict(sol2.x), self._unpack(lin2, sol2.x, nl2)[1], (lin2, sol2.param_cov())
         mf = ModelFit(eff, theta, sol, lin, sd, sd_noise)
         mf._ctx["refit"] = refit
         mf._ctx["pred"] = lin.predict(sol.x)

@@ -524,6 +524,8 @@ def _row(name: str, ev: dict, before: dict, after: dict, primary: str, cal_theta
             "shrink": sh.get(primary), "metric": primary, "accepted": ev["accepted"],
             "heldout_gain": ev["gain"]["gain"], "heldout_gain_ci": ev["gain"]["ci"],
             "folds_passed": ev["gain"]["folds_passed"], "folds_testable": ev["gain"].get("folds_testable"),
+            # folds whose refit of the candidate left its held-out prediction undetermined (left out)
+            "folds_undetermined": int(sum(not f.get("used", True) for f in ev["gain"].get("folds", []))),
             "delta_bic": ev["delta_bic"], "in_bounds": ev["in_bounds"],
             "param_significant": ev["param_significant"], "why_not": list(ev.get("why_not") or []),
             # how far the nominal knobs move from their calibration when the effect is fitted beside them

@@ -36,6 +36,12 @@ def clean(obj):
     return str(obj)
 
 
+def _undetermined(row: dict) -> str:
+    """`` (N undetermined)`` after a row's fold counts when folds were left out, else ``""``."""
+    n = row.get("folds_undetermined")
+    return f" ({n} undetermined)" if n else ""
+
+
 def _fmt(v, spec=".4g"):
     return "-" if v is None else format(v, spec) if isinstance(v, (int, float)) else str(v)
 
@@ -143,8 +149,14 @@ def markdown(rep: dict) -> str:
         ci = row.get("heldout_gain_ci")
         g = f"{_fmt(row.get('heldout_gain'))} [{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "-"
         L.append(f"| {row['effect']} | {'**yes**' if row['accepted'] else 'no'} | {ps} | {g} | "
-                 f"{_fmt(row.get('folds_passed'))} / {_fmt(row.get('folds_testable'))} | {_fmt(row.get('delta_bic'), '.3g')} | {_fmt(row.get('gap_before'))} | "
+                 f"{_fmt(row.get('folds_passed'))} / {_fmt(row.get('folds_testable'))}{_undetermined(row)} | "
+                 f"{_fmt(row.get('delta_bic'), '.3g')} | {_fmt(row.get('gap_before'))} | "
                  f"{_fmt(row.get('gap_after'))} | {_fmt(row.get('shrink'), '.3f')} | {'; '.join(row.get('why_not') or [])} |")
+    if any(row.get("folds_undetermined") for row in rep["ranked"]):
+        L += ["", "A fold marked undetermined is one where the candidate's refit left its held-out prediction "
+              "uncertain by more than 10 noise sigmas (a knob its parameter makes collinear on that training "
+              "window): it tests one arbitrary point of that uncertainty, not the effect, and is left out of "
+              "the candidate's held-out interval and fold counts."]
     c = rep.get("combined")
     if c:
         L += ["", f"## 4. Gap before and after ({' + '.join(c['effects'])}), held-out data", "",
