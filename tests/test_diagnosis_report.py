@@ -44,3 +44,18 @@ def test_undetermined_folds_are_named_beside_the_fold_counts():
     from fmvmg_sim.diagnosis.report import _undetermined
     assert _undetermined({"folds_undetermined": 1}) == " (1 undetermined)"
     assert _undetermined({"folds_undetermined": 0}) == "" and _undetermined({}) == ""
+
+
+def test_the_undetermined_note_reads_its_threshold_from_the_settings():
+    from fmvmg_sim.diagnosis.report import markdown
+    row = {"effect": "thermal_hysteresis", "accepted": True, "params": {"quad_rel": -5.7e-4}, "heldout_gain": 34.3,
+           "heldout_gain_ci": [12.5, 57.4], "folds_passed": 2, "folds_testable": 2, "folds_undetermined": 1,
+           "delta_bic": -5.7e4, "gap_before": 9.96, "gap_after": 21.97, "shrink": -3.86, "why_not": []}
+    rep = {"verdict": "explained", "accepted": ["thermal_hysteresis"], "ambiguous_with": {}, "ranked": [row],
+           "localization": {"channels": {}, "allan_bands": {}, "regimes": {}}, "remainder": None,
+           "record": {"path": "r.csv", "samples": 10800, "duration_s": 10800.0, "sample_interval_s": 1.0,
+                      "channels": ["rate_V"], "issues": {}, "folds": []},
+           "calibration": {"parameters": {}}, "settings": {"indeterminate_sd": 7.5}}
+    md = markdown(rep)
+    assert "| 2 / 2 (1 undetermined) |" in md
+    assert "uncertain by more than 7.5 noise sigmas" in md

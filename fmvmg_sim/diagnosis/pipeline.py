@@ -18,8 +18,8 @@ from ..errors import InputError
 from ..record import Record, read_record
 from ..scenario import Scenario, load_scenario
 from . import localize as loc
-from .attribute import (MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, Scorer, ambiguity, attribute, in_sample,
-                        rejudge_second, separating_experiment)
+from .attribute import (INDETERMINATE_SD, MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, Scorer, ambiguity, attribute,
+                        in_sample, rejudge_second, separating_experiment)
 from .calibrate import calibrate
 from .data import Prepared, prepare
 from .fitting import Fitter
@@ -493,7 +493,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                              for f, c in zip(folds, cover["folds"])]},
         "settings": {"null_runs": n_null, "seed": seed, "block_s": float(np.median(np.diff(prep.block_time_s()))),
                      "delta_bic_max": -10.0, "alpha_holm": loc.ALPHA,
-                     "folds_not_scored": scorer.dropped_folds, "min_train_span_K": MIN_TRAIN_SPAN_K},
+                     "folds_not_scored": scorer.dropped_folds, "min_train_span_K": MIN_TRAIN_SPAN_K,
+                     "indeterminate_sd": INDETERMINATE_SD},
         "wall_time_s": time.perf_counter() - wall0,
     }
     report["_debug"] = {"single": {n: {"gain": ev["gain"].get("by_channel"), "dbic": ev["delta_bic"],

@@ -153,10 +153,11 @@ def markdown(rep: dict) -> str:
                  f"{_fmt(row.get('delta_bic'), '.3g')} | {_fmt(row.get('gap_before'))} | "
                  f"{_fmt(row.get('gap_after'))} | {_fmt(row.get('shrink'), '.3f')} | {'; '.join(row.get('why_not') or [])} |")
     if any(row.get("folds_undetermined") for row in rep["ranked"]):
+        sd = rep.get("settings", {}).get("indeterminate_sd")
         L += ["", "A fold marked undetermined is one where the candidate's refit left its held-out prediction "
-              "uncertain by more than 10 noise sigmas (a knob its parameter makes collinear on that training "
-              "window): it tests one arbitrary point of that uncertainty, not the effect, and is left out of "
-              "the candidate's held-out interval and fold counts."]
+              f"uncertain by more than {_fmt(sd, 'g')} noise sigmas (a knob its parameter makes collinear on that "
+              "training window): it tests one arbitrary point of that uncertainty, not the effect, and is left out "
+              "of the candidate's held-out interval and fold counts."]
     c = rep.get("combined")
     if c:
         L += ["", f"## 4. Gap before and after ({' + '.join(c['effects'])}), held-out data", "",
