@@ -379,7 +379,7 @@ def _scorer_stub(Y, S, folds):
     from fmvmg_sim.diagnosis.attribute import Scorer
     from fmvmg_sim.diagnosis.fitting import Fitter
 
-    f = SimpleNamespace(Y=Y, S=S, S_score=S, present=np.ones(Y.shape[1], bool))
+    f = SimpleNamespace(Y=Y, S=S, S_score=S, present=np.ones(Y.shape[1], bool), converter={})
     f.residual = lambda pred, scoring=False, Y=None: Fitter.residual(f, pred, scoring, Y)
     sc = Scorer.__new__(Scorer)
     sc.f, sc.folds, sc.noise_params = f, folds, [(0.0, 1.0)] * Y.shape[1]
@@ -416,7 +416,7 @@ def test_a_fold_whose_candidate_refit_is_undetermined_cannot_test_it():
     assert [f["used"] for f in g["folds"]] == [False, True, True]
     assert g["folds"][0]["total"] < -1e4 and not g["folds"][0]["passed"] and not g["folds"][0]["testable"]
     assert g["folds_passed"] == 2 and g["ci"][0] > 3.0             # 4.5 nats per block expected
-    exact = sc.gain({"folds": [(p, e) for p, e, _ in cand["folds"]]}, base)
+    exact = sc.gain({"folds": [(p, e) for p, e, *_ in cand["folds"]]}, base)
     assert exact["ci"][0] < 0 and exact["folds_passed"] == 2
     # when every fold is undetermined, none is left out
     calls = iter([0, 0, 0])

@@ -155,8 +155,14 @@ class Scorer:
         self.dropped_folds = [k for k in range(len(folds)) if k not in keep] if keep else []
         self.folds_needed = min(FOLDS_NEEDED, len(self.folds))
         # the nominal model on each fold
-        self.nominal = self.fold_predictions(lambda rows: (cal.lin.predict(fitter.solve(cal.lin, rows).x), {}))
+        self.nominal = self.fold_predictions(self._nominal_refit)
         self.nominal_train_pred = cal.lin.predict(cal.solution.x)
+
+    def _nominal_refit(self, rows: np.ndarray) -> tuple:
+        """The nominal model refitted on ``rows`` (with its uncertainty where a converter needs it)."""
+        sol = self.f.solve(self.cal.lin, rows)
+        pred = self.cal.lin.predict(sol.x)
+        return (pred, {}, (self.cal.lin, sol.param_cov())) if self.f.converter else (pred, {})
 
     def fold_predictions(self, refit) -> dict:
         """Predictions of ``refit(rows)`` on each fold, plus the stitched held-out prediction.
@@ -170,20 +176,22 @@ class Scorer:
         Returns
         -------
         dict
-            ``folds``: list of (pred, effects, determinate); ``determinate`` is False when the refit leaves
-            its held-out prediction undetermined (:data:`INDETERMINATE_SD`), None when unknown;
+            ``folds``: list of (pred, effects, determinate, sd); ``determinate`` is False when the refit leaves
+            its held-out prediction undetermined (:data:`INDETERMINATE_SD`), None when unknown; ``sd`` the
+            held-out prediction's sd (None when unknown);
             ``heldout``: stitched block prediction (NaN outside tests).
         """
         out, ho = [], np.full_like(self.f.Y, np.nan)
         for fd in self.folds:
             pred, eff, *unc = refit(fd["train"])
-            det = None
+            det, sd = None, None
             if unc:
                 lin, cov = unc[0]
-                ratio = lin.predict_sd(cov, fd["test"]) / self.f.S_score[fd["test"]]
+                sd = lin.predict_sd(cov, fd["test"])
+                ratio = sd / self.f.S_score[fd["test"]]
                 ratio[:, ~self.f.present] = 0.0
                 det = bool(np.all(np.nanpercentile(ratio, 90, axis=0) <= INDETERMINATE_SD)) if len(ratio) else True
-            out.append((pred, eff, det))
+            out.append((pred, eff, det, sd))
             ho[fd["test"]] = pred[fd["test"]]
         return {"folds": out, "heldout": ho}
 
@@ -223,14 +231,28 @@ class Scorer:
             par = self.channel_noise(base["folds"][k][0], fd["train"])
             Zb, Zc = (self.f.residual(pred, scoring=True)[fd["test"]] for pred in (base["folds"][k][0],
                                                                                  cand["folds"][k][0]))
-            dch = nll_by_channel(Zb, par) - nll_by_channel(Zc, par)
+            if self.f.converter:
+                # channels read through a coarse converter: each prediction through its staircase
+                par = [None if c in self.f.converter else p for c, p in enumerate(par)]
+                (cb, _), (cc, mc) = (self.f.converter_nll(p[0], fd["test"], p[3] if len(p) > 3 else None)
+                                     for p in (base["folds"][k], cand["folds"][k]))
+                dch = (nll_by_channel(Zb, par) + cb) - (nll_by_channel(Zc, par) + cc)
+                # were the candidate true, its expected block means would be read (a plug-in estimate of the
+                # divergence: it can fall below zero where the baseline's moments are the wider, hence the clip)
+                Yc = np.where(np.isfinite(self.f.Y[fd["test"]]), mc, np.nan)
+                cb_t = self.f.converter_nll(base["folds"][k][0], fd["test"], base["folds"][k][3], Y=Yc)[0]
+                cc_t = self.f.converter_nll(cand["folds"][k][0], fd["test"], cand["folds"][k][3], Y=Yc)[0]
+                info_conv = float(np.sum(cb_t - cc_t))
+            else:
+                dch = nll_by_channel(Zb, par) - nll_by_channel(Zc, par)
+                info_conv = 0.0
             by_ch.append(dch)
             diff = dch.sum(axis=1)
             lo, hi = block_bootstrap_ci(diff, seed=k)
             # the gain expected were the candidate true: the baseline's residual would then be the
             # candidate's prediction change (plus noise); its whitened energy is the Kullback-Leibler
             # divergence between the two predictive distributions on the held-out blocks
-            info = expected_gain(Zb - Zc, par)
+            info = max(expected_gain(Zb - Zc, par) + info_conv, 0.0)
             tot = float(np.sum(diff))
             # were the candidate true, the fold's gain would scatter about ``info`` by sqrt(2 info)
             consistent = abs(tot - info) <= 3.0 * np.sqrt(2.0 * info) + FOLD_CONSISTENCY_REL * info

@@ -17,7 +17,8 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from ..effects import MODELS, EffectSet
-from .data import Prepared
+from .converter import Converter, misread_nll, staircase_moments
+from .data import FLOORS, Prepared
 from .forward import CHANNELS, ResponseTable, response_table, temperature_grid
 from .parameters import BOUND_TOLERANCES, NOMINAL_KNOBS, apply_effects, apply_nominal
 
@@ -150,6 +151,8 @@ class Fitter:
         self._paths = {}
         #: Block sigma used to *score* models (model floor included); see :meth:`set_score_floor`.
         self.S_score = self.S
+        #: Channels read through a coarse converter, by index (:meth:`set_converter`)
+        self.converter: dict[int, Converter] = {}
 
     # ---- devices and tables -------------------------------------------------------------
     def device(self, theta: dict, effects: dict | None = None):
@@ -384,6 +387,62 @@ class Fitter:
         Z = ((self.Y if Y is None else Y) - pred) / (self.S_score if scoring else self.S)
         Z[:, ~self.present] = np.nan
         return Z
+
+    def set_converter(self, converter: dict) -> None:
+        """Score the channels read through a coarse converter with its expected staircase (:mod:`.converter`).
+
+        Parameters
+        ----------
+        converter : dict
+            ``{channel index: Converter}``; empty to score every channel with the smooth model.
+        """
+        self.converter = dict(converter)
+
+    def converter_nll(self, pred: np.ndarray, rows: np.ndarray, pred_sd: np.ndarray | None = None,
+                      Y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Held-out negative log-likelihood of the channels read through a coarse converter, per block.
+
+        Each block mean is scored against the moments of a block of quantised samples
+        (:func:`~.converter.staircase_moments`): the prediction passed through the quantiser, dithered by the
+        white noise, and blurred by what is common to the block (the slow noise, the scoring floors and the
+        prediction's own sd ``pred_sd``). A block on a plateau is then known to a tiny fraction of a step, and
+        a model error of a step there would cost without bound, so each block's density is a mixture: with
+        weight :data:`~.converter.MISREAD` the level is misread by the model, its spread widened by half a
+        step. The density is in units of the scoring sigma, as :func:`~.likelihood.nll` is for the smooth
+        channels; blocks are treated as independent (the slow noise is in the moments).
+
+        Parameters
+        ----------
+        pred : ndarray, shape (n, C)
+        rows : ndarray of bool
+        pred_sd : ndarray, shape (m, C), optional
+            The prediction's sd on ``rows`` (parameter uncertainty); zero when not given.
+        Y : ndarray, optional
+            Observations on ``rows`` (shape (m, C)) in place of the record's (a null replicate, or a
+            candidate's own expected block means).
+
+        Returns
+        -------
+        nll : ndarray, shape (m, C)
+            Zero for smooth channels and missing blocks.
+        mean : ndarray, shape (m, C)
+            The expected block means (NaN for smooth channels).
+        """
+        Yr = self.Y[rows] if Y is None else Y
+        out = np.zeros(Yr.shape)
+        mean = np.full(Yr.shape, np.nan)
+        for c, cv in self.converter.items():
+            if not self.present[c]:
+                continue
+            Ss, S = self.S_score[rows, c], self.S[rows, c]
+            sd = np.zeros(len(Ss)) if pred_sd is None else np.nan_to_num(pred_sd[:, c])
+            tau_c = np.sqrt(FLOORS[CHANNELS[c]] ** 2 + np.clip(Ss ** 2 - S ** 2, 0.0, None) + cv.slow_V ** 2
+                            + sd ** 2)
+            n = np.maximum(self.prep.block_counts(CHANNELS[c])[rows], 1)
+            m, v = staircase_moments(pred[rows, c], cv.lsb_V, cv.tau_V, tau_c, n)
+            out[:, c] = np.nan_to_num(misread_nll(Yr[:, c], m, v, cv.lsb_V, Ss))
+            mean[:, c] = m
+        return out, mean
 
     @contextmanager
     def extra_score_floor(self, floor: np.ndarray):

@@ -38,7 +38,8 @@ LOCATED = ("allan_bands", "regimes")
 CLOSURE_MIN = 0.5
 
 
-def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool = False) -> list[dict]:
+def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool = False,
+                 raw: list | None = None) -> list[dict]:
     """Simulate the calibrated nominal model with noise on the record's inputs, once per device.
 
     Parameters
@@ -50,6 +51,9 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
     prep : Prepared
     seed : int
     progress : bool, optional
+    raw : list, optional
+        When given, each replicate's quantised channels before the record's lattice is applied are appended
+        to it.
 
     Returns
     -------
@@ -87,7 +91,10 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
         s.rate = PiecewiseProfile(tp, rp, [])
         res = run_envelope(s, progress=False, log=lambda m: None)
         i = np.clip(idx, 0, len(res.time_s) - 1)
-        out.append({c: quantize(np.asarray(res[c])[i], lattice[j]) for j, c in enumerate(CHANNELS)})
+        x = {c: np.asarray(res[c])[i] for c in CHANNELS}
+        if raw is not None:
+            raw.append({c: x[c] for j, c in enumerate(CHANNELS) if lattice[j] > 0})
+        out.append({c: quantize(x[c], lattice[j]) for j, c in enumerate(CHANNELS)})
     return out
 
 

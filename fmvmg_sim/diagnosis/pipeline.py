@@ -21,7 +21,8 @@ from . import localize as loc
 from .attribute import (INDETERMINATE_SD, MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, Scorer, ambiguity, attribute,
                         in_sample, rejudge_second, separating_experiment)
 from .calibrate import calibrate
-from .data import Prepared, prepare
+from .converter import Converter, staircase_visible
+from .data import CONVERTER_CHANNELS, Prepared, prepare
 from .fitting import Fitter
 from .forward import CHANNELS, IRATE
 from .likelihood import slow_state_fit
@@ -149,6 +150,52 @@ def _null_noise_model(null_Z: list) -> list:
             continue
         rho, K, s = slow_state_fit(series)
         out.append((rho, K, max(s, NOISE_SD_FLOOR)))
+    return out
+
+
+def converter_model(prep, raw_nulls: list, null_preds: list) -> dict:
+    """The coarse converter of each channel whose staircase shows, from the record's lattice and the null.
+
+    The lattice is the record's own (:meth:`~.data.Prepared.lattice`); the noise that dithers it is not (a
+    quantiser much coarser than its noise hides it), so it is read off the null replicates before their lattice
+    is applied: the per-sample white level from first differences, and the slow level from each replicate's
+    block means about its own device's prediction.
+
+    Parameters
+    ----------
+    prep : Prepared
+    raw_nulls : list of dict
+        Null replicates before the lattice (:func:`~.localize.null_records`).
+    null_preds : list of ndarray
+        Each replicate's noise-free block prediction.
+
+    Returns
+    -------
+    dict
+        ``{channel index: Converter}`` (empty without a visible staircase).
+    """
+    out = {}
+    if not raw_nulls:
+        return out
+    L = prep.lattice()
+    for c in CONVERTER_CHANNELS:
+        i = CHANNELS.index(c)
+        if c not in prep.channels or not L[i] > 0:
+            continue
+        taus, slow = [], []
+        n = np.maximum(prep.block_counts(c), 1)
+        for raw, pred in zip(raw_nulls, null_preds):
+            d = np.diff(np.asarray(raw[c], dtype=float))
+            d = d[np.isfinite(d)]
+            tau = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0) if d.size else np.nan
+            r = prep.block_mean(raw[c]) - pred[:, i]
+            ok = np.isfinite(r)
+            taus.append(tau)
+            slow.append(np.sqrt(max(float(np.var(r[ok])) - float(np.mean(tau ** 2 / n[ok])), 0.0)) if ok.any()
+                        else np.nan)
+        tau, sl = float(np.nanmedian(taus)), float(np.nanmedian(slow))
+        if staircase_visible(float(L[i]), tau) and np.isfinite(sl):
+            out[i] = Converter(float(L[i]), tau, sl)
     return out
 
 
@@ -285,7 +332,10 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     # 2. the null: the calibrated nominal model re-simulated with its noise on the record's inputs, each
     # replicate's device drawn from the calibration's posterior
     thetas = posterior_draws(cal, n_null, seed)
-    nulls = loc.null_records(scn, [fitter.device(th) for th in thetas], prep, seed, progress=show)
+    raw_nulls = []
+    nulls = loc.null_records(scn, [fitter.device(th) for th in thetas], prep, seed, progress=show, raw=raw_nulls)
+    null_preds = [fitter.table(th).evaluate(die_b, fitter.rate_b) for th in thetas]
+    fitter.set_converter(converter_model(prep, raw_nulls, null_preds))
     ho_b = np.zeros(prep.n_blocks, bool)
     for fd in folds:
         ho_b |= fd["test"]
@@ -297,7 +347,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     # (else an unmodelled gradient term reads as extra flicker), in the record and in the null alike
     slow = loc.slow_templates(prep)
     st_null, null_ms, null_ho_allan, null_tr_allan, null_Z = [], [], [], [], []
-    for th, nr in zip(thetas, nulls):
+    for th, nr, pred_k in zip(thetas, nulls, null_preds):
         Yn = np.column_stack([prep.block_mean(nr[c]) for c in CHANNELS])
         Yn[fitter.transient_b, IRATE] = np.nan  # as in the measured blocks
         # localisation: against the replicate's own calibration on the same training blocks, as the record's
@@ -311,7 +361,6 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                                           _rate_residual(prep, pred_n, nr["rate_V"])))
         # noise alone (against the replicate's own device): the scoring noise model, the metrics' noise
         # level and the flicker band
-        pred_k = fitter.table(th).evaluate(die_b, fitter.rate_b)
         rr = _rate_residual(prep, pred_k, nr["rate_V"])
         null_Z.append(fitter.residual(pred_k, scoring=True, Y=Yn))
         null_ms.append(_metrics(prep, fitter, pred_k, ho_b, Y=Yn))
@@ -485,6 +534,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,
                    "sample_interval_s": prep.sample_interval_s, "channels": list(prep.channels),
                    "issues": prep.issues,
+                   # channels scored through the record's coarse converter (Fitter.converter_nll)
+                   "converter": {CHANNELS[i]: {"lsb_V": cv.lsb_V, "noise_V": cv.tau_V, "slow_noise_V": cv.slow_V}
+                                 for i, cv in fitter.converter.items()},
                    "temperature_C": cover["record_C"],
                    "heldout_outside_training_temperatures": {k: cover[k] for k in (
                        "heldout_outside_fraction", "heldout_outside_max_K", "margin_K")},

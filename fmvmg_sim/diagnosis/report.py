@@ -122,6 +122,10 @@ def markdown(rep: dict) -> str:
     L += ["## Record", "", f"{r['samples']} samples, {r['duration_s'] / 3600:.2f} h at {r['sample_interval_s']:.3g} s; "
           f"channels: {', '.join(r['channels'])}.", ""]
     L += _coverage_lines(r, rep.get("settings", {}), rep.get("design"))
+    if r.get("converter"):
+        L += ["Read through a coarse converter (held-out blocks scored through its expected staircase): " + "; ".join(
+            f"{c} (step {v['lsb_V']:.3g} V, noise {v['noise_V']:.2g} V per sample, slow noise {v['slow_noise_V']:.2g} "
+            "V per block)" for c, v in r["converter"].items()) + ".", ""]
     iss = r["issues"]
     if iss.get("gaps") or iss.get("nan_samples"):
         L.append(f"Gaps: {len(iss.get('gaps', []))} ({iss.get('gap_total_s', 0):.0f} s missing); "
