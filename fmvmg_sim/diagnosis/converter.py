@@ -10,8 +10,12 @@ level crosses. Passing each prediction through the converter scores those crossi
 Each block mean is modelled as ``mean_i Q(mu + d + e_i)`` over its ``n`` samples, ``e_i ~ N(0, tau^2)``
 independent (the white noise that dithers the quantiser) and ``d ~ N(0, tau_c^2)`` common to the block (the
 slow noise, the model floors and the prediction's own uncertainty). Its mean and variance are exact under that
-model; the mean is the staircase smoothed by ``sqrt(tau^2 + tau_c^2)``, and where ``tau_c`` reaches ``L`` the
-two moments fall back to the smooth prediction with variance ``tau_c^2 + (tau^2 + L^2/12) / n``.
+model; the mean is the staircase smoothed by ``sqrt(tau^2 + tau_c^2)``, and where ``tau_c`` passes half a step
+the two moments are those of the smooth prediction, with variance ``tau_c^2 + (tau^2 + L^2/12) / n``.
+
+Each block is then scored with a misread mixture (:func:`misread_nll`), so that a model error of a step on a
+plateau costs a bounded amount. The white noise ``tau`` is read off the null replicates
+(:func:`~.pipeline.converter_model`).
 """
 
 from __future__ import annotations
@@ -32,9 +36,8 @@ CHUNK = 512
 ACTIVE_MIN = 1e-3
 #: Levels each side of the nearest one summed over, in units of the per-sample noise (plus one).
 LEVEL_SPAN_SIGMA = 6.0
-#: A block whose common offset sd exceeds this many steps sees no staircase (its fundamental is attenuated by
-#: ``exp(-2 pi^2 0.5^2)``, 0.007, and the
-#: fundamental's share of the staircase's mean is below 1e-3 of a step): the smooth moments are exact there.
+#: A block whose common offset sd exceeds this many steps sees no staircase: its fundamental is attenuated by
+#: ``exp(-2 pi^2 0.5^2)`` (0.007), below 1e-3 of a step in the mean, and the smooth moments hold there.
 SMOOTH_ABOVE_STEPS = 0.5
 #: Share of blocks whose level the model may misread (a model error of about a step), the weight of the wide
 #: part of each block's density (:func:`misread_nll`).
