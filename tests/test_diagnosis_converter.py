@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fmvmg_sim.diagnosis.converter import MISREAD, misread_nll, staircase_moments, staircase_visible
+from fmvmg_sim.diagnosis.converter import MISREAD, lattice_noise, misread_nll, staircase_moments, staircase_visible
 
 
 def _monte_carlo(mu, lsb, tau, tau_c, n, draws=200_000, seed=0):
@@ -109,3 +109,16 @@ def test_a_misread_block_costs_a_bounded_amount():
     # a Gaussian would charge (L / sd)^2 / 2 = 5000 nats; the mixture charges log(1/MISREAD) + log(L / 2 sd) + ...
     bound = np.log(1 / MISREAD) + np.log(lsb / 2 / 1e-4) + 2.0 + 1.0
     assert 0 < (wrong - right)[0] < bound
+
+
+@pytest.mark.parametrize("tau_steps", [0.15, 0.5, 0.85, 1.6, 6.0])
+def test_lattice_noise_reads_white_noise_through_a_fine_lattice(tau_steps):
+    """The null replicates sit on the nominal converter's own lattice: the median absolute difference is a whole
+    step whatever the noise, the share of repeated levels gives the noise back."""
+    lsb = 3.05e-4
+    rng = np.random.default_rng(3)
+    t = np.arange(20000)
+    x = 0.01 * np.sin(2 * np.pi * t / 7000) + tau_steps * lsb * rng.standard_normal(len(t))
+    q = np.round(x / lsb) * lsb
+    assert lattice_noise(q, lsb) == pytest.approx(tau_steps * lsb, rel=0.05)
+    assert np.isnan(lattice_noise(q[:50], lsb))

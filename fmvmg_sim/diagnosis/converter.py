@@ -181,3 +181,51 @@ def misread_nll(y: np.ndarray, mean: np.ndarray, var: np.ndarray, lsb: float, sc
     a = np.log(1.0 - MISREAD) - 0.5 * np.log(2 * np.pi * var) - 0.5 * d2 / var
     b = np.log(MISREAD) - 0.5 * np.log(2 * np.pi * wide) - 0.5 * d2 / wide
     return -(np.logaddexp(a, b) + np.log(scale))
+
+
+def _p_same_level(s: float) -> float:
+    """Chance that two independent samples ``N(u, s^2)`` (in steps) read the same level, ``u`` uniform."""
+    u = np.linspace(0.0, 1.0, 41)[:-1] + 0.0125
+    K = int(np.ceil(6.0 * s)) + 2
+    lev = np.arange(-K, K + 1, dtype=float)
+    p = _level_probs(u, lev, s)
+    return float(np.mean(np.sum(p * p, axis=1)))
+
+
+def lattice_noise(x_V: np.ndarray, lsb_V: float) -> float:
+    """Per-sample white noise of a slowly varying signal read through a quantiser of step ``lsb_V``.
+
+    The robust spread of first differences is useless on a lattice (its median is a whole step or zero). The
+    share of consecutive samples that read the same level is not: for white noise of sd ``s`` steps about a
+    mean that wanders over the lattice it is ``P(s) = E_u sum_j p_j(u)^2``, decreasing in ``s``, and is
+    solved for ``s`` (rate-table steps and other jumps are too rare to move it).
+
+    Parameters
+    ----------
+    x_V : ndarray
+        Samples on the lattice.
+    lsb_V : float
+        The lattice step (> 0).
+
+    Returns
+    -------
+    float
+        NaN when fewer than 100 finite differences.
+    """
+    d = np.diff(np.asarray(x_V, dtype=float))
+    d = d[np.isfinite(d)]
+    if d.size < 100 or not lsb_V > 0:
+        return float("nan")
+    same = float(np.mean(np.abs(d) < 0.5 * lsb_V))
+    lo, hi = 0.02, 50.0
+    if same >= _p_same_level(lo):
+        return lo * lsb_V
+    if same <= _p_same_level(hi):
+        return hi * lsb_V
+    for _ in range(40):
+        mid = np.sqrt(lo * hi)
+        if _p_same_level(mid) > same:
+            lo = mid
+        else:
+            hi = mid
+    return float(np.sqrt(lo * hi) * lsb_V)

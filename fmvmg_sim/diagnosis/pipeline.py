@@ -21,8 +21,8 @@ from . import localize as loc
 from .attribute import (INDETERMINATE_SD, MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, Scorer, ambiguity, attribute,
                         in_sample, rejudge_second, separating_experiment)
 from .calibrate import calibrate
-from .converter import Converter, staircase_visible
-from .data import CONVERTER_CHANNELS, Prepared, prepare
+from .converter import Converter, lattice_noise, staircase_visible
+from .data import CONVERTER_CHANNELS, ON_LATTICE_MIN, Prepared, lattice_lsb, prepare
 from .fitting import Fitter
 from .forward import CHANNELS, IRATE
 from .likelihood import slow_state_fit
@@ -158,8 +158,9 @@ def converter_model(prep, raw_nulls: list, null_preds: list) -> dict:
 
     The lattice is the record's own (:meth:`~.data.Prepared.lattice`); the noise that dithers it is not (a
     quantiser much coarser than its noise hides it), so it is read off the null replicates before their lattice
-    is applied: the per-sample white level from first differences, and the slow level from each replicate's
-    block means about its own device's prediction.
+    is applied: the per-sample white level from first differences (from the share of repeated levels when the
+    replicate sits on the nominal converter's own lattice, :func:`~.converter.lattice_noise`), and the slow level
+    from each replicate's block means about its own device's prediction.
 
     Parameters
     ----------
@@ -185,9 +186,16 @@ def converter_model(prep, raw_nulls: list, null_preds: list) -> dict:
         taus, slow = [], []
         n = np.maximum(prep.block_counts(c), 1)
         for raw, pred in zip(raw_nulls, null_preds):
-            d = np.diff(np.asarray(raw[c], dtype=float))
-            d = d[np.isfinite(d)]
-            tau = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0) if d.size else np.nan
+            x = np.asarray(raw[c], dtype=float)
+            l0, on = lattice_lsb(x)
+            if l0 > 0 and on >= ON_LATTICE_MIN:
+                # the replicate is itself on the nominal converter's (finer) lattice: a robust spread of its
+                # differences would be one nominal step whatever the noise
+                tau = lattice_noise(x, l0)
+            else:
+                d = np.diff(x)
+                d = d[np.isfinite(d)]
+                tau = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0) if d.size else np.nan
             r = prep.block_mean(raw[c]) - pred[:, i]
             ok = np.isfinite(r)
             taus.append(tau)
