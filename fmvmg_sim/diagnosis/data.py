@@ -47,6 +47,24 @@ ON_LATTICE_MIN = 0.9
 CONVERTER_CHANNELS = ("rate_V", "quadrature_V")
 
 
+def difference_sigma(x: np.ndarray, empty: float = float("nan")) -> float:
+    """Per-sample white-noise level of a series from its first differences (robust: MAD, NaNs skipped).
+
+    Parameters
+    ----------
+    x : ndarray
+    empty : float, optional
+        Returned when there is no finite difference.
+
+    Returns
+    -------
+    float
+    """
+    d = np.diff(np.asarray(x, dtype=float))
+    d = d[np.isfinite(d)]
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2)) if d.size else empty
+
+
 def lattice_lsb(x_V: np.ndarray) -> tuple[float, float]:
     """Spacing of the lattice a quantised signal lives on, and the fraction of samples on it.
 
@@ -213,9 +231,7 @@ class Prepared:
             s = np.full(len(CHANNELS), np.nan)
             for i, c in enumerate(CHANNELS):
                 if c in self.channels:
-                    d = np.diff(self.obs[c])
-                    d = d[np.isfinite(d)]
-                    s[i] = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2) if d.size else np.nan
+                    s[i] = difference_sigma(self.obs[c])
             self._cache["sig"] = s
         return self._cache["sig"]
 

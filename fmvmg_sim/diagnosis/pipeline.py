@@ -22,7 +22,7 @@ from .attribute import (INDETERMINATE_SD, MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, 
                         in_sample, rejudge_second, separating_experiment)
 from .calibrate import calibrate
 from .converter import Converter, lattice_noise, staircase_visible
-from .data import CONVERTER_CHANNELS, ON_LATTICE_MIN, Prepared, lattice_lsb, prepare
+from .data import CONVERTER_CHANNELS, ON_LATTICE_MIN, Prepared, difference_sigma, lattice_lsb, prepare
 from .fitting import Fitter
 from .forward import CHANNELS, IRATE
 from .likelihood import slow_state_fit
@@ -72,9 +72,7 @@ def check_units(rec: Record, prep: Prepared, scn: Scenario, nominal_pred: np.nda
                 raise InputError(f"rate_V / rate_dps = {ratio:.4g} V per deg/s, but the scenario's device has a "
                                  f"nominal scale factor of {sf:.4g} V per deg/s: rate_dps is in the wrong unit "
                                  f"(about {sf / ratio:.3g}x off)", f"{name}: rate_dps")
-    d = np.diff(r)
-    d = d[np.isfinite(d)]
-    noise = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2) if d.size else 0.0
+    noise = difference_sigma(r, empty=0.0)
     vn = scn.device.values["noise"]["sense_input_V_per_sqrtHz"]
     expected = _ARW_PER_VNOISE * vn / np.sqrt(prep.sample_interval_s)
     rate_true = prep.rate_true_dps
@@ -193,9 +191,7 @@ def converter_model(prep, raw_nulls: list, null_preds: list) -> dict:
                 # differences would be one nominal step whatever the noise
                 tau = lattice_noise(x, l0)
             else:
-                d = np.diff(x)
-                d = d[np.isfinite(d)]
-                tau = 1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0) if d.size else np.nan
+                tau = difference_sigma(x)
             r = prep.block_mean(raw[c]) - pred[:, i]
             ok = np.isfinite(r)
             taus.append(tau)
