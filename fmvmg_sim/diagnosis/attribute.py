@@ -234,15 +234,17 @@ class Scorer:
             if self.f.converter:
                 # channels read through a coarse converter: each prediction through its staircase
                 par = [None if c in self.f.converter else p for c, p in enumerate(par)]
-                (cb, _), (cc, mc) = (self.f.converter_nll(p[0], fd["test"], p[3] if len(p) > 3 else None)
-                                     for p in (base["folds"][k], cand["folds"][k]))
-                dch = (nll_by_channel(Zb, par) + cb) - (nll_by_channel(Zc, par) + cc)
+                mb, mc = (self.f.converter_moments(p[0], fd["test"], p[3] if len(p) > 3 else None)
+                          for p in (base["folds"][k], cand["folds"][k]))
+                dch = ((nll_by_channel(Zb, par) + self.f.converter_nll(mb, fd["test"]))
+                       - (nll_by_channel(Zc, par) + self.f.converter_nll(mc, fd["test"])))
                 # were the candidate true, its expected block means would be read (a plug-in estimate of the
                 # divergence: it can fall below zero where the baseline's moments are the wider, hence the clip)
-                Yc = np.where(np.isfinite(self.f.Y[fd["test"]]), mc, np.nan)
-                cb_t = self.f.converter_nll(base["folds"][k][0], fd["test"], base["folds"][k][3], Y=Yc)[0]
-                cc_t = self.f.converter_nll(cand["folds"][k][0], fd["test"], cand["folds"][k][3], Y=Yc)[0]
-                info_conv = float(np.sum(cb_t - cc_t))
+                Yc = np.full(Zc.shape, np.nan)
+                for c, (m, _) in mc.items():
+                    Yc[:, c] = np.where(np.isfinite(self.f.Y[fd["test"], c]), m, np.nan)
+                info_conv = float(np.sum(self.f.converter_nll(mb, fd["test"], Y=Yc)
+                                         - self.f.converter_nll(mc, fd["test"], Y=Yc)))
             else:
                 dch = nll_by_channel(Zb, par) - nll_by_channel(Zc, par)
                 info_conv = 0.0

@@ -398,18 +398,12 @@ class Fitter:
         """
         self.converter = dict(converter)
 
-    def converter_nll(self, pred: np.ndarray, rows: np.ndarray, pred_sd: np.ndarray | None = None,
-                      Y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Held-out negative log-likelihood of the channels read through a coarse converter, per block.
+    def converter_moments(self, pred: np.ndarray, rows: np.ndarray, pred_sd: np.ndarray | None = None) -> dict:
+        """Moments of the block means of each channel read through a coarse converter, on ``rows``.
 
-        Each block mean is scored against the moments of a block of quantised samples
-        (:func:`~.converter.staircase_moments`): the prediction passed through the quantiser, dithered by the
-        white noise, and blurred by what is common to the block (the slow noise, the scoring floors and the
-        prediction's own sd ``pred_sd``). A block on a plateau is then known to a tiny fraction of a step, and
-        a model error of a step there would cost without bound, so each block's density is a mixture: with
-        weight :data:`~.converter.MISREAD` the level is misread by the model, its spread widened by half a
-        step. The density is in units of the scoring sigma, as :func:`~.likelihood.nll` is for the smooth
-        channels; blocks are treated as independent (the slow noise is in the moments).
+        The prediction passed through the quantiser, dithered by the white noise and blurred by what is common
+        to the block: the slow noise, the scoring floors and the prediction's own sd ``pred_sd``
+        (:func:`~.converter.staircase_moments`).
 
         Parameters
         ----------
@@ -417,20 +411,13 @@ class Fitter:
         rows : ndarray of bool
         pred_sd : ndarray, shape (m, C), optional
             The prediction's sd on ``rows`` (parameter uncertainty); zero when not given.
-        Y : ndarray, optional
-            Observations on ``rows`` (shape (m, C)) in place of the record's (a null replicate, or a
-            candidate's own expected block means).
 
         Returns
         -------
-        nll : ndarray, shape (m, C)
-            Zero for smooth channels and missing blocks.
-        mean : ndarray, shape (m, C)
-            The expected block means (NaN for smooth channels).
+        dict
+            ``{channel index: (mean, var)}``, each of shape (m,).
         """
-        Yr = self.Y[rows] if Y is None else Y
-        out = np.zeros(Yr.shape)
-        mean = np.full(Yr.shape, np.nan)
+        out = {}
         for c, cv in self.converter.items():
             if not self.present[c]:
                 continue
@@ -439,10 +426,38 @@ class Fitter:
             tau_c = np.sqrt(FLOORS[CHANNELS[c]] ** 2 + np.clip(Ss ** 2 - S ** 2, 0.0, None) + cv.slow_V ** 2
                             + sd ** 2)
             n = np.maximum(self.prep.block_counts(CHANNELS[c])[rows], 1)
-            m, v = staircase_moments(pred[rows, c], cv.lsb_V, cv.tau_V, tau_c, n)
-            out[:, c] = np.nan_to_num(misread_nll(Yr[:, c], m, v, cv.lsb_V, Ss))
-            mean[:, c] = m
-        return out, mean
+            out[c] = staircase_moments(pred[rows, c], cv.lsb_V, cv.tau_V, tau_c, n)
+        return out
+
+    def converter_nll(self, moments: dict, rows: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
+        """Held-out negative log-likelihood of the channels read through a coarse converter, per block.
+
+        Each block mean is scored against its moments (:meth:`converter_moments`). A block on a plateau is
+        known to a tiny fraction of a step, and a model error of a step there would cost without bound, so each
+        block's density is a mixture: with weight :data:`~.converter.MISREAD` the level is misread by the
+        model, its spread widened by half a step. The density is in units of the scoring sigma, as
+        :func:`~.likelihood.nll` is for the smooth channels; blocks are treated as independent (the slow noise
+        is in the moments).
+
+        Parameters
+        ----------
+        moments : dict
+            From :meth:`converter_moments` on the same ``rows``.
+        rows : ndarray of bool
+        Y : ndarray, optional
+            Observations on ``rows`` (shape (m, C)) in place of the record's (a candidate's own expected block
+            means).
+
+        Returns
+        -------
+        ndarray, shape (m, C)
+            Zero for smooth channels and missing blocks.
+        """
+        Yr = self.Y[rows] if Y is None else Y
+        out = np.zeros(Yr.shape)
+        for c, (m, v) in moments.items():
+            out[:, c] = np.nan_to_num(misread_nll(Yr[:, c], m, v, self.converter[c].lsb_V, self.S_score[rows, c]))
+        return out
 
     @contextmanager
     def extra_score_floor(self, floor: np.ndarray):
