@@ -147,3 +147,35 @@ def test_misses_are_counted_by_cause():
     assert sc["misses_by_cause"]["single_above"]["no_heldout_test"] == 1
     assert sc["misses_by_cause"]["pairs"] == dict({k: 0 for k in MISS_CAUSES}, hidden_by_converter=1,
                                                   beside_stronger=1, criteria=1, one_temperature=2)
+
+
+def test_inseparable_pair_members_are_scored_apart():
+    # a pair member whose signature the other member explains (its SNR beyond the partner below the limit)
+    # is missed as "inseparable", before any look-alike or criterion reading; the separable pairs get their
+    # own exact-set rate beside the target's, and labels without the field count by their tier
+    from fmvmg_sim.diagnosis.benchmark import SEPARABLE_SNR_MIN, score
+    from fmvmg_sim.diagnosis.cases import SNR_TIERS
+    assert SEPARABLE_SNR_MIN == next(lo for lo, _, n in SNR_TIERS if n == "above")
+
+    def res(accepted, amb=None):
+        return {"verdict": "ambiguous" if amb else "explained", "accepted": list(accepted), "ranked": list(accepted),
+                "ambiguous_with": amb or {},
+                "rows": {a: {"shrink": 0.9, "params": {}, "accepted": True, "folds_testable": 3, "why_not": []}
+                         for a in accepted}}
+    pair = ["q_factor_drift", "reference_drift"]
+    labs = [{"case": 0, "effects": {e: {} for e in pair}, "tier": "above", "snr": 90.0,
+             "snr_by_effect": {"q_factor_drift": 105.0, "reference_drift": 95.0},
+             "snr_separable_by_effect": {"q_factor_drift": 0.11, "reference_drift": 13.0}, "tier_separable": "below"},
+            {"case": 1, "effects": {e: {} for e in pair}, "tier": "above", "snr": 90.0,
+             "snr_by_effect": {"q_factor_drift": 105.0, "reference_drift": 95.0},
+             "snr_separable_by_effect": {"q_factor_drift": 40.0, "reference_drift": 30.0}, "tier_separable": "above"},
+            {"case": 2, "effects": {"duffing": {}, "feedthrough": {}}, "tier": "above", "snr": 50.0}]
+    results = [res(["reference_drift"], {"reference_drift": ["q_factor_drift"]}),
+               res(["reference_drift"], {"reference_drift": ["q_factor_drift"]}),
+               res(["duffing", "feedthrough"])]
+    sc = score(labs, results)
+    assert [r.get("miss") for r in sc["rows"]] == [{"q_factor_drift": "inseparable"},
+                                                   {"q_factor_drift": "look_alike"}, None]
+    assert [r["tier_separable"] for r in sc["rows"]] == ["below", "above", "above"]
+    assert sc["pair_cases_above"] == 3 and sc["pairs_exact_above"] == 1 / 3
+    assert sc["pair_cases_separable"] == 2 and sc["pairs_exact_separable"] == 0.5

@@ -40,3 +40,16 @@ def test_summary_of_an_empty_selection_has_no_verdict():
     assert "| top-1, single effects above the limit | - | - | >= 0.9 | - |" in md
     assert "| false alarms (null cases) | 0.000 | 0 of 1 | <= 0.05 | yes |" in md
     assert "No single effect above the limit and no pair member was missed." in md
+
+
+def test_summary_shows_the_separable_pairs_beside_the_target():
+    labs = [{"case": 0, "effects": {"duffing": {}, "feedthrough": {}}, "tier": "above", "snr": 50.0,
+             "tier_separable": "above"},
+            {"case": 1, "effects": {"q_factor_drift": {}, "reference_drift": {}}, "tier": "above", "snr": 50.0,
+             "tier_separable": "below"}]
+    sc = score(labs, [_res("explained", ["duffing", "feedthrough"]), _res("explained", ["reference_drift"])])
+    md = format_scores(sc)
+    row = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in md.splitlines()
+           if ln.startswith("| ")}
+    assert row["exact pairs"][:2] == ["0.500", "1 of 2"]
+    assert row["exact pairs, both members above the limit beside the other (separable)"] == ["1.000", "1 of 1"]

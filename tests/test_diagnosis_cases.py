@@ -167,6 +167,33 @@ def test_signature_snr_counts_the_records_slow_noise(tmp_path):
     assert scale > 1.0 and 0 < snr < 800.0
 
 
+def test_separable_snr_is_what_the_partner_cannot_explain(tmp_path):
+    # a Q drift and a reference drift both move the AGC effort (u ~ A/Q): beside each other, each keeps a
+    # fraction of its own SNR; a temperature-rate term follows the oven's ramps, which a quadrature drift
+    # (a law in temperature) cannot mimic, so it keeps its own; beside a noise level nothing is absorbed
+    from fmvmg_sim.diagnosis.cases import noise_model, separable_snr, signature_snr
+    from fmvmg_sim.scenario import load_scenario
+    rec, _ = oven_record(tmp_path, "twin", seed=21, theta=THETA)
+    dev = load_scenario(NOMINAL).device_nominal
+    noise = noise_model(read_record(rec), dev, THETA)
+    look_alikes = {"q_factor_drift": {"q_tc_per_K": 3e-5},
+                   "reference_drift": {"vref_tc_per_K": 2e-6, "rectifier_mV_per_K": 0.01}}
+    distinct = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}, "quadrature_drift": {"beta_per_K": 1e-4}}
+    for eff in (look_alikes, distinct):
+        own = {n: signature_snr(rec, NOMINAL, dev, THETA, {n: v}, noise=noise) for n, v in eff.items()}
+        assert min(own.values()) > 50
+        sep = separable_snr(rec, dev, THETA, eff, noise, own)
+        if eff is look_alikes:
+            assert all(sep[n] < 0.3 * own[n] for n in eff), (own, sep)
+        else:
+            assert abs(sep["temperature_rate"] / own["temperature_rate"] - 1) < 0.01, (own, sep)
+    with_noise = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}, "quantization": {"lsb_V": 0.005}}
+    own = {"temperature_rate": 60.0, "quantization": 32.0}
+    assert separable_snr(rec, dev, THETA, with_noise, noise, own) == own
+    single = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}}
+    assert separable_snr(rec, dev, THETA, single, noise, {"temperature_rate": 60.0}) == {"temperature_rate": 60.0}
+
+
 def test_scaled_cases_stay_clear_of_physical_bounds():
     # a case's amplitude scaled past its bound is clipped inside it, where the diagnosis's
     # "not pinned at a bound" rule can accept a right answer; time constants are left alone

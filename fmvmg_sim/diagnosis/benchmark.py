@@ -7,7 +7,9 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
 * ``top1`` / ``top2``: single-effect cases above the detection limit (SNR tier "above") whose effect
   is first / in the first two of the ranking, with a verdict other than "none";
 * ``pairs_exact``: two-effect cases whose accepted set equals the truth (``pairs_exact_above``: both
-  members above the limit);
+  members above the limit; ``pairs_exact_separable``: both members above the limit beside the other, i.e.
+  what the other member cannot explain of each is above it, :func:`.cases.separable_snr`; a diagnostic
+  beside the target's definition, labels without it count by ``tier``);
 * ``truth_in_ambiguity_set``: effect cases whose true effect is accepted or in an ambiguity set;
 * ``median_shrink``: held-out gap shrink of the accepted effect when the attribution is right;
 * ``param_rel_error_median``: relative error of the recovered parameters when right
@@ -95,12 +97,18 @@ def param_errors(effect: str, truth: dict, est: dict) -> list[float]:
     return out
 
 
+#: Detection limit (SNR) of a pair member beyond its partner: the "above" tier's lower edge
+#: (:data:`.cases.SNR_TIERS`).
+SEPARABLE_SNR_MIN = 10.0
+
 #: Why a true effect was missed, in the order :func:`miss_cause` tests them.
 MISS_CAUSES = {
     "one_temperature": "the record's training windows never leave one temperature: an effect that acts only "
                        "through a temperature change is not identifiable there (the design-unidentifiable case)",
     "hidden_by_converter": "extra flicker beside a coarser converter (not judged there; in the benchmark's cases its "
                            "wander lies far below one converter step)",
+    "inseparable": "the pair's other member explains this one's signature: beside it, what is left is below the "
+                   "detection limit (cases.separable_snr), so no test can tell the pair from the other alone",
     "no_heldout_test": "no held-out fold can test the effect as fitted (its prediction moves no fold by the nats a "
                        "test needs: the signature is absent from the training window or from the held-out blocks)",
     "look_alike": "a look-alike explains the same gap (the truth is in the ambiguity set or named as the look-alike)",
@@ -111,7 +119,7 @@ MISS_CAUSES = {
 
 
 def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: dict, snr_by: dict,
-               not_identifiable: list | tuple = ()) -> str:
+               not_identifiable: list | tuple = (), snr_separable: dict | None = None) -> str:
     """Why a true effect is missing from (or not first in) the accepted set: a key of :data:`MISS_CAUSES`.
 
     Parameters
@@ -127,6 +135,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
         The label's SNR by effect.
     not_identifiable : list of str, optional
         Effects the record's design cannot identify (the report's ``design``, read from the record alone).
+    snr_separable : dict, optional
+        The label's SNR by effect beyond the pair's other member (:func:`.cases.separable_snr`).
 
     Returns
     -------
@@ -138,6 +148,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
         return "one_temperature"
     if effect == "flicker_noise" and "quantization" in truth:
         return "hidden_by_converter"
+    if len(truth) == 2 and (snr_separable or {}).get(effect, np.inf) < SEPARABLE_SNR_MIN:
+        return "inseparable"
     row = rows.get(effect) or {}
     if row.get("folds_testable") == 0:
         return "no_heldout_test"
@@ -170,7 +182,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
         amb = set() if err else {x for v in res["ambiguous_with"].values() for x in v}
         claimed = (not err) and (res["verdict"] != "none" or bool(acc))
         r = {"case": lab["case"], "truth": truth, "tier": lab["tier"], "tier_white": lab.get("tier_white", lab["tier"]),
-             "snr": lab["snr"], "error": res.get("error"),
+             "tier_separable": lab.get("tier_separable", lab["tier"]), "snr": lab["snr"], "error": res.get("error"),
              "verdict": None if err else res["verdict"], "accepted": acc}
         # "unexplained" beside accepted effects: they explain part of the gap, not where it lies
         partial = bool(not err and acc and res["verdict"] == "unexplained")
@@ -196,7 +208,8 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             missed = (len(truth) == 1 and not r["top1"]) or (len(truth) == 2 and not r["pair_exact"])
             if missed and not err:
                 r["miss"] = {t: miss_cause(t, truth, acc, amb, res.get("rows") or {}, lab.get("snr_by_effect") or {},
-                                         (res.get("design") or {}).get("not_identifiable") or ())
+                                         (res.get("design") or {}).get("not_identifiable") or (),
+                                         lab.get("snr_separable_by_effect"))
                              for t in truth if not (len(truth) == 2 and t in acc)}
         right = [t for t in truth if t in acc]
         if right and not err:
@@ -218,6 +231,10 @@ def score(labels: list[dict], results: list[dict]) -> dict:
     out["top2"], _ = rate("top2", lambda r: r["tier"] == "above")
     out["pairs_exact"], out["pair_cases"] = rate("pair_exact", lambda r: True)
     out["pairs_exact_above"], out["pair_cases_above"] = rate("pair_exact", lambda r: r["tier"] == "above")
+    # pairs whose members each stay above the limit beside the other (what the partner cannot explain of
+    # it: cases.separable_snr); beside the target's definition, not in its place
+    out["pairs_exact_separable"], out["pair_cases_separable"] = rate("pair_exact",
+                                                                      lambda r: r["tier_separable"] == "above")
     out["pairs_at_least_one"], _ = rate("pair_one", lambda r: True)
     out["truth_in_ambiguity_set"], _ = rate("in_set", lambda r: r["tier"] == "above")
     # correct attributions (top-1 right, or a pair's exact set) whose verdict still calls a part unexplained

@@ -56,6 +56,9 @@ def format_scores(sc: dict) -> str:
     L += ["", "| other score | measured | cases |", "|---|---|---|",
           f"| exact pairs, both members above the limit | {_pct(sc.get('pairs_exact_above'))} | "
           f"{_count(sc.get('pairs_exact_above'), sc.get('pair_cases_above'))} |",
+          f"| exact pairs, both members above the limit beside the other (separable) | "
+          f"{_pct(sc.get('pairs_exact_separable'))} | "
+          f"{_count(sc.get('pairs_exact_separable'), sc.get('pair_cases_separable'))} |",
           f"| truth in the ambiguity set (above the limit) | {_pct(sc.get('truth_in_ambiguity_set'))} | - |",
           f"| right, but a located gap left open | {_pct(sc.get('partial_when_right'))} | "
           f"{_count(sc.get('partial_when_right'), sc.get('right_cases'))} |",

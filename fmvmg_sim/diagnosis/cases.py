@@ -346,9 +346,13 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     label["tier_white"] = tier(min(white.values())) if effects else "null"
     # a pair is as detectable as its weaker member
     label["tier"] = tier(min(snr_by.values())) if effects else "null"
+    # ... and as detectable beside its partner as what the partner cannot explain of it
+    sep = separable_snr(path, s.device_nominal, theta, eff, noise, snr_by) if effects else {}
+    label["snr_separable_by_effect"] = sep
+    label["tier_separable"] = tier(min(sep.values())) if effects else "null"
     if ool is not None:
         label.update(out_of_library=ool, snr_target=target, snr=ool["snr"], tier=tier(ool["snr"]),
-                     tier_white=tier(ool["snr"]))
+                     tier_white=tier(ool["snr"]), tier_separable=tier(ool["snr"]))
     atomic_write_text(out / "labels" / f"case_{k:04d}.json", json.dumps(label, indent=1) + "\n")
     return label
 
@@ -546,6 +550,47 @@ def noise_model(record, device_nominal, theta: dict) -> list:
     return out
 
 
+def _truth_fitter(record_path, device_nominal, theta: dict, det: dict):
+    """A :class:`~.fitting.Fitter` on the record's profile whose observations are the noise-free quasi-static
+    truth of the device ``theta`` with the deterministic effects ``det`` (absent channels stay absent)."""
+    from ..averaged import scale_factor_V_per_dps
+    from ..diagram import build_diagram
+    from ..record import read_record
+    from .data import prepare
+    from .fitting import PATH_EFFECTS, Fitter
+    rec = read_record(record_path, warn_unknown=False)
+    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
+    fit = Fitter(prepare(rec, sf), device_nominal)
+    path = fit.path({n: v for n, v in det.items() if n in PATH_EFFECTS})
+    truth = fit.table(theta, det, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
+    truth[:, ~fit.present] = np.nan
+    fit.Y = truth
+    return fit
+
+
+def _whitened_norm(fit, pred: np.ndarray, noise: list) -> float:
+    """``sqrt(chi^2)`` of the truth's residual against ``pred``, each channel whitened by its noise model."""
+    from .likelihood import innovations
+    R = fit.residual(pred)
+    chi2 = sum(float(np.nansum((innovations(R[:, c], p[0], p[1]) / p[2]) ** 2))
+               for c, p in enumerate(noise) if p is not None and np.isfinite(R[:, c]).any())
+    return float(np.sqrt(chi2))
+
+
+def _noise_level_snr(effects: dict, device_nominal) -> float:
+    """Analytic SNR of the noise-level effects in ``effects`` (0 without one): ``10 x`` their added
+    variance over the nominal one in their band."""
+    snr = 0.0
+    nz = device_nominal.values["noise"]
+    if "quantization" in effects:
+        snr = max(snr, 10 * (effects["quantization"]["lsb_V"] ** 2 - nz["quantization_lsb_V"] ** 2) / 12 / (8e-4) ** 2)
+    if "flicker_noise" in effects:
+        f = effects["flicker_noise"]
+        base = nz["flicker_output_dps2"] + nz["flicker_phase_rad2"] * np.deg2rad(200.0) ** 2 * (180 / np.pi) ** 2
+        snr = max(snr, 10 * (f["h_output_dps2"] + f["h_phase_rad2"] * (200.0) ** 2) / base)
+    return float(snr)
+
+
 def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effects: dict,
                   noise: list | None = None) -> float:
     """Signal-to-noise ratio of the effects' signature that the nominal calibration cannot absorb.
@@ -571,37 +616,60 @@ def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effec
     """
     if not effects:
         return 0.0
-    from ..averaged import scale_factor_V_per_dps
-    from ..diagram import build_diagram
-    from ..record import read_record
     from .calibrate import calibrate
-    from .data import prepare
-    from .fitting import PATH_EFFECTS, Fitter
-    snr_noise = 0.0
-    nz = device_nominal.values["noise"]
-    if "quantization" in effects:
-        snr_noise = max(snr_noise, 10 * (effects["quantization"]["lsb_V"] ** 2 - nz["quantization_lsb_V"] ** 2)
-                        / 12 / (8e-4) ** 2)
-    if "flicker_noise" in effects:
-        f = effects["flicker_noise"]
-        base = nz["flicker_output_dps2"] + nz["flicker_phase_rad2"] * np.deg2rad(200.0) ** 2 * (180 / np.pi) ** 2
-        snr_noise = max(snr_noise, 10 * (f["h_output_dps2"] + f["h_phase_rad2"] * (200.0) ** 2) / base)
-    det = {n: v for n, v in effects.items() if n not in ("quantization", "flicker_noise")}
+    snr_noise = _noise_level_snr(effects, device_nominal)
+    det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
     if not det:
-        return float(snr_noise)
-    rec = read_record(record_path, warn_unknown=False)
-    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
-    prep = prepare(rec, sf)
-    fit = Fitter(prep, device_nominal)
-    path = fit.path({n: v for n, v in det.items() if n in PATH_EFFECTS})
-    truth = fit.table(theta, det, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
-    truth[:, ~fit.present] = np.nan
-    fit.Y = truth
-    cal = calibrate(fit, np.ones(prep.n_blocks, bool))
+        return snr_noise
+    fit = _truth_fitter(record_path, device_nominal, theta, det)
+    cal = calibrate(fit, np.ones(fit.prep.n_blocks, bool))
     if noise is None:
         return float(max(np.sqrt(cal.solution.cost), snr_noise))
-    from .likelihood import innovations
-    R = fit.residual(cal.lin.predict(cal.solution.x))
-    chi2 = sum(float(np.nansum((innovations(R[:, c], p[0], p[1]) / p[2]) ** 2))
-               for c, p in enumerate(noise) if p is not None and np.isfinite(R[:, c]).any())
-    return float(max(np.sqrt(chi2), snr_noise))
+    return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise), snr_noise))
+
+
+def separable_snr(record_path, device_nominal, theta: dict, effects: dict, noise: list,
+                  snr_by: dict) -> dict:
+    """SNR of each member of a pair beyond what its partner can explain.
+
+    A pair is told apart from one of its members alone only by the part of the other's signature that
+    the member (with the nominal knobs) cannot absorb. With two deterministic members, the pair's
+    noise-free truth is fitted with the nominal knobs and the partner (its parameters free, the
+    nonlinear one searched) on every block; the residual, whitened as in :func:`signature_snr`, has norm
+    ``sqrt(chi^2)``. A look-alike partner can leave next to nothing (a Q drift beside a reference drift
+    whose rectifier part moves the AGC effort the other way), however strong each member is alone. A
+    noise-level member and a deterministic signature do not absorb each other: each keeps ``snr_by``.
+
+    Parameters
+    ----------
+    record_path : path-like
+    device_nominal : Device
+    theta, effects : dict
+        The case's nominal deviations and (scaled) effects.
+    noise : list
+        Per-channel ``(rho, K, s)`` from :func:`noise_model`.
+    snr_by : dict
+        Each member's own SNR (:func:`signature_snr` of it alone).
+
+    Returns
+    -------
+    dict
+        Effect -> SNR beyond its partner (``snr_by`` for a single effect, or where the partner's fit
+        leaves the model's domain).
+    """
+    from .calibrate import calibrate
+    from .model import EffectModel
+    out = dict(snr_by)
+    det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
+    if len(effects) != 2 or len(det) != 2:
+        return out
+    fit = _truth_fitter(record_path, device_nominal, theta, det)
+    rows = np.ones(fit.prep.n_blocks, bool)
+    cal = calibrate(fit, rows)
+    for n in det:
+        try:
+            mf = EffectModel(fit, cal, [m for m in det if m != n]).fit(rows)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            continue
+        out[n] = _whitened_norm(fit, mf._ctx["pred"], noise)
+    return out
