@@ -173,9 +173,15 @@ def test_inseparable_pair_members_are_scored_apart():
     results = [res(["reference_drift"], {"reference_drift": ["q_factor_drift"]}),
                res(["reference_drift"], {"reference_drift": ["q_factor_drift"]}),
                res(["duffing", "feedthrough"])]
+    # the third answer is exact; the second's wrong member is a look-alike the record could tell apart, unless
+    # the answer explains the truth to within the detection limit (its SNR beyond the answer below 10)
     sc = score(labs, results)
     assert [r.get("miss") for r in sc["rows"]] == [{"q_factor_drift": "inseparable"},
                                                    {"q_factor_drift": "look_alike"}, None]
+    results[1]["snr_truth_beyond_answer"] = 2.5
+    assert score(labs, results)["rows"][1]["miss"] == {"q_factor_drift": "indistinguishable"}
+    results[1]["snr_truth_beyond_answer"] = 25.0
+    assert score(labs, results)["rows"][1]["miss"] == {"q_factor_drift": "look_alike"}
     assert [r["tier_separable"] for r in sc["rows"]] == ["below", "above", "above"]
     assert sc["pair_cases_above"] == 3 and sc["pairs_exact_above"] == 1 / 3
     assert sc["pair_cases_separable"] == 2 and sc["pairs_exact_separable"] == 0.5

@@ -187,6 +187,14 @@ def test_separable_snr_is_what_the_partner_cannot_explain(tmp_path):
             assert all(sep[n] < 0.3 * own[n] for n in eff), (own, sep)
         else:
             assert abs(sep["temperature_rate"] / own["temperature_rate"] - 1) < 0.01, (own, sep)
+    # the truth beyond an answer: nothing explained is the signature's own SNR; the look-alike explains most
+    # of a Q drift, an unrelated effect none of it
+    from fmvmg_sim.diagnosis.cases import snr_beyond
+    q = {"q_factor_drift": look_alikes["q_factor_drift"]}
+    own_q = signature_snr(rec, NOMINAL, dev, THETA, q, noise=noise)
+    assert abs(snr_beyond(rec, dev, THETA, q, noise, []) / own_q - 1) < 1e-9
+    assert snr_beyond(rec, dev, THETA, q, noise, ["reference_drift"]) < 0.3 * own_q
+    assert snr_beyond(rec, dev, THETA, q, noise, ["temperature_rate", "quantization"]) > 0.95 * own_q
     with_noise = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}, "quantization": {"lsb_V": 0.005}}
     own = {"temperature_rate": 60.0, "quantization": 32.0}
     assert separable_snr(rec, dev, THETA, with_noise, noise, own) == own

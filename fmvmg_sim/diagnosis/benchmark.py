@@ -23,7 +23,8 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
   "none"), each over all of them and (``_above``) over those above the detection limit;
 * ``misses_by_cause``: why each true effect of a missed case (a single effect not first, a pair not exact)
   was missed (:data:`MISS_CAUSES`, :func:`miss_cause`), for single effects above the limit and for pairs;
-  each case row holds its own as ``miss``;
+  each case row holds its own as ``miss``, and (``snr_truth_beyond_answer``, :func:`answer_snr`, computed by
+  :func:`run_benchmark` for every wrong answer) how far the answer is from the truth in the record's noise;
 * ``partial_when_right``: correct attributions (``top1`` or ``pair_exact``) whose verdict is nevertheless
   "unexplained" (the accepted set leaves a located gap open), over ``right_cases``.
 """
@@ -97,6 +98,56 @@ def param_errors(effect: str, truth: dict, est: dict) -> list[float]:
     return out
 
 
+def wrong_answer(label: dict, result: dict) -> bool:
+    """Whether a diagnosis missed its case: a single effect not first, a pair not exact (never a null or an
+    out-of-library case, nor a failed diagnosis).
+
+    Parameters
+    ----------
+    label, result : dict
+        The case's label and its diagnosis (``accepted``).
+
+    Returns
+    -------
+    bool
+    """
+    truth = sorted(label["effects"])
+    if "error" in result or not truth or label.get("out_of_library"):
+        return False
+    acc = result["accepted"]
+    return acc[:1] != truth if len(truth) == 1 else sorted(acc) != truth
+
+
+def answer_snr(label: dict, result: dict, scenario: str) -> float | None:
+    """SNR of a case's true signature beyond the deterministic effects its diagnosis accepted.
+
+    Parameters
+    ----------
+    label, result : dict
+        The case's label and its diagnosis (``accepted``).
+    scenario : str
+        Nominal scenario (its device is the case generator's).
+
+    Returns
+    -------
+    float or None
+        None when the answer or the truth has no deterministic effect (nothing to compare), or when the
+        answer's fit leaves the model's domain.
+    """
+    from ..scenario import load_scenario
+    from .cases import NOISE_LEVEL, snr_beyond
+    from .forward import CHANNELS
+    det = [a for a in result.get("accepted") or [] if a not in NOISE_LEVEL]
+    if not det or all(t in NOISE_LEVEL for t in label["effects"]):
+        return None
+    noise = [label["noise_model"].get(c) for c in CHANNELS]
+    try:
+        return snr_beyond(label["record"], load_scenario(scenario).device_nominal, label["nominal_deviation"],
+                          label["effects"], noise, det)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
+
+
 #: Detection limit (SNR) of a pair member beyond its partner: the "above" tier's lower edge
 #: (:data:`.cases.SNR_TIERS`).
 SEPARABLE_SNR_MIN = 10.0
@@ -109,6 +160,8 @@ MISS_CAUSES = {
                            "wander lies far below one converter step)",
     "inseparable": "the pair's other member explains this one's signature: beside it, what is left is below the "
                    "detection limit (cases.separable_snr), so no test can tell the pair from the other alone",
+    "indistinguishable": "the accepted answer explains the true signature to within the detection limit (the "
+                         "truth's SNR beyond the answer, cases.snr_beyond): the record cannot prefer the truth",
     "no_heldout_test": "no held-out fold can test the effect as fitted (its prediction moves no fold by the nats a "
                        "test needs: the signature is absent from the training window or from the held-out blocks)",
     "look_alike": "a look-alike explains the same gap (the truth is in the ambiguity set or named as the look-alike)",
@@ -119,7 +172,8 @@ MISS_CAUSES = {
 
 
 def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: dict, snr_by: dict,
-               not_identifiable: list | tuple = (), snr_separable: dict | None = None) -> str:
+               not_identifiable: list | tuple = (), snr_separable: dict | None = None,
+               snr_beyond_answer: float | None = None) -> str:
     """Why a true effect is missing from (or not first in) the accepted set: a key of :data:`MISS_CAUSES`.
 
     Parameters
@@ -137,6 +191,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
         Effects the record's design cannot identify (the report's ``design``, read from the record alone).
     snr_separable : dict, optional
         The label's SNR by effect beyond the pair's other member (:func:`.cases.separable_snr`).
+    snr_beyond_answer : float, optional
+        The true signature's SNR beyond the accepted effects (:func:`answer_snr`).
 
     Returns
     -------
@@ -150,6 +206,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
         return "hidden_by_converter"
     if len(truth) == 2 and (snr_separable or {}).get(effect, np.inf) < SEPARABLE_SNR_MIN:
         return "inseparable"
+    if snr_beyond_answer is not None and snr_beyond_answer < SEPARABLE_SNR_MIN:
+        return "indistinguishable"
     row = rows.get(effect) or {}
     if row.get("folds_testable") == 0:
         return "no_heldout_test"
@@ -203,13 +261,15 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             r["pair_exact"] = bool(sorted(acc) == truth)
             r["pair_one"] = bool(set(acc) & set(truth))
             r["in_set"] = bool(set(truth) <= (set(acc) | amb))
+        if res.get("snr_truth_beyond_answer") is not None:
+            r["snr_truth_beyond_answer"] = res["snr_truth_beyond_answer"]
         if truth and not lab.get("out_of_library"):
             r["partial"] = partial
             missed = (len(truth) == 1 and not r["top1"]) or (len(truth) == 2 and not r["pair_exact"])
             if missed and not err:
                 r["miss"] = {t: miss_cause(t, truth, acc, amb, res.get("rows") or {}, lab.get("snr_by_effect") or {},
                                          (res.get("design") or {}).get("not_identifiable") or (),
-                                         lab.get("snr_separable_by_effect"))
+                                         lab.get("snr_separable_by_effect"), res.get("snr_truth_beyond_answer"))
                              for t in truth if not (len(truth) == 2 and t in acc)}
         right = [t for t in truth if t in acc]
         if right and not err:
@@ -333,6 +393,10 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
         if cluster is not None:
             cluster.close()
     labels = [json.loads((out / "labels" / f"{Path(r).stem}.json").read_text()) for r in recs]
+    # how far each wrong answer is from the truth in the record's own noise (read after every diagnosis)
+    missed = [k for k, (lab, res) in enumerate(zip(labels, results)) if wrong_answer(lab, res)]
+    for k in tqdm(missed, disable=not progress, file=sys.stderr, desc="misses"):
+        results[k]["snr_truth_beyond_answer"] = answer_snr(labels[k], results[k], str(scenario))
     sc = score(labels, results)
     from .cases import CaseMix
     sc.update(seed=seed, case_duration_s=duration_s, case_rate_Hz=rate_Hz, null_runs=n_null,

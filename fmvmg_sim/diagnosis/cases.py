@@ -628,17 +628,59 @@ def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effec
     return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise), snr_noise))
 
 
+def _snr_beyond(fit, cal, names: list, noise: list) -> float:
+    """SNR of ``fit``'s truth left after the calibrated knobs and the effects ``names`` (fitted on every block)."""
+    from .model import EffectModel
+    if not names:
+        return _whitened_norm(fit, cal.lin.predict(cal.solution.x), noise)
+    mf = EffectModel(fit, cal, sorted(names)).fit(np.ones(fit.prep.n_blocks, bool))
+    return _whitened_norm(fit, mf._ctx["pred"], noise)
+
+
+def snr_beyond(record_path, device_nominal, theta: dict, effects: dict, noise: list, explained_by: list) -> float:
+    """SNR of the true signature that ``explained_by`` cannot explain.
+
+    The noise-free truth of ``effects`` (as in :func:`signature_snr`) is fitted with the nominal knobs and the
+    deterministic effects ``explained_by`` (parameters free, the nonlinear one searched) on every block; the
+    residual, whitened by the record's noise model, has norm ``sqrt(chi^2)``. Below the detection limit, no
+    criterion on this record can prefer the truth to ``explained_by`` (a diagnosis that answered
+    ``explained_by`` was wrong, but the record could not say so).
+
+    Parameters
+    ----------
+    record_path : path-like
+    device_nominal : Device
+    theta, effects : dict
+        The case's nominal deviations and (scaled) effects.
+    noise : list
+        Per-channel ``(rho, K, s)`` from :func:`noise_model`.
+    explained_by : list of str
+        Effect names (noise-level ones are left out: they absorb no deterministic signature).
+
+    Returns
+    -------
+    float
+        0 when ``effects`` has no deterministic effect.
+    """
+    from .calibrate import calibrate
+    det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
+    if not det:
+        return 0.0
+    fit = _truth_fitter(record_path, device_nominal, theta, det)
+    cal = calibrate(fit, np.ones(fit.prep.n_blocks, bool))
+    return _snr_beyond(fit, cal, [n for n in explained_by if n not in NOISE_LEVEL], noise)
+
+
 def separable_snr(record_path, device_nominal, theta: dict, effects: dict, noise: list,
                   snr_by: dict) -> dict:
     """SNR of each member of a pair beyond what its partner can explain.
 
     A pair is told apart from one of its members alone only by the part of the other's signature that
-    the member (with the nominal knobs) cannot absorb. With two deterministic members, the pair's
-    noise-free truth is fitted with the nominal knobs and the partner (its parameters free, the
-    nonlinear one searched) on every block; the residual, whitened as in :func:`signature_snr`, has norm
-    ``sqrt(chi^2)``. A look-alike partner can leave next to nothing (a Q drift beside a reference drift
-    whose rectifier part moves the AGC effort the other way), however strong each member is alone. A
-    noise-level member and a deterministic signature do not absorb each other: each keeps ``snr_by``.
+    the member (with the nominal knobs) cannot absorb: for two deterministic members, :func:`snr_beyond`
+    of the pair's truth with the partner as the explanation. A look-alike partner can leave next to
+    nothing (a Q drift beside a reference drift whose rectifier part moves the AGC effort the other way),
+    however strong each member is alone. A noise-level member and a deterministic signature do not
+    absorb each other: each keeps ``snr_by``.
 
     Parameters
     ----------
@@ -658,18 +700,15 @@ def separable_snr(record_path, device_nominal, theta: dict, effects: dict, noise
         leaves the model's domain).
     """
     from .calibrate import calibrate
-    from .model import EffectModel
     out = dict(snr_by)
     det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
     if len(effects) != 2 or len(det) != 2:
         return out
     fit = _truth_fitter(record_path, device_nominal, theta, det)
-    rows = np.ones(fit.prep.n_blocks, bool)
-    cal = calibrate(fit, rows)
+    cal = calibrate(fit, np.ones(fit.prep.n_blocks, bool))
     for n in det:
         try:
-            mf = EffectModel(fit, cal, [m for m in det if m != n]).fit(rows)
+            out[n] = _snr_beyond(fit, cal, [m for m in det if m != n], noise)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
             continue
-        out[n] = _whitened_norm(fit, mf._ctx["pred"], noise)
     return out
