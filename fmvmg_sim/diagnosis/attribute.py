@@ -22,7 +22,9 @@ accepted when
 
 Two effects: forward selection (the best accepted effect, then each other candidate jointly
 with it, scored against the one-effect model); when no single effect passes, pairs fitted from
-scratch, each pair scored against each of its members alone. Noise-level effects (quantisation, flicker) are
+scratch (:func:`pairs_from_scratch`), each pair scored against each of its members alone. The pipeline also
+fits pairs from scratch when the one selected effect leaves the located gap open, and keeps a pair that
+gains more held out. Noise-level effects (quantisation, flicker) are
 judged separately: the rate output's lattice, and the Allan flicker band against the null.
 
 A Q drift and a reference drift whose Vref part is below the least share its prior allows beside the
@@ -521,52 +523,80 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                         pair_alternatives.setdefault(best, []).append(alt)
     elif max_effects > 1:
         # no single effect passes, but a pair may: each alone mis-fits the other's signature (pinned at a
-        # bound, or extrapolating badly); start from the strongest candidates and fit pairs from scratch
-        fitted = [n for n in single if single[n]["fit"] is not None]
-        starts = sorted((n for n in fitted if single[n]["gain"]["ci"][0] > 0
-                         and scorer.folds_ok(single[n]["gain"])),
-                        key=lambda n: -single[n]["gain"]["gain"])[:PAIR_STARTS]
-        # also the best training fits: an effect whose held-out score suffers from the other one's
-        # unmodelled signature (the calibration bent to absorb it) still fits its training window well
-        starts += [n for n in sorted((n for n in fitted if single[n]["delta_bic"] < DELTA_BIC_MAX),
-                                     key=lambda n: single[n]["delta_bic"])[:PAIR_STARTS + 1] if n not in starts]
-        for a in starts:
-            for n in single:
-                key = "+".join(sorted((a, n)))
-                if n == a or key in pair_scan or (a in NONLINEAR and n in NONLINEAR):
-                    continue
-                pair_scan[key] = evaluate(scorer, sorted((a, n)), base, scorer.nominal_train_pred)
-                # both must matter: each one's parameters significant in the joint fit, and the pair
-                # must beat each member alone on held-out data (as a forward-selected second effect
-                # must beat the first): two look-alikes fitted against each other otherwise follow noise
-                ev = pair_scan[key]
-                if ev["accepted"]:
-                    ev["accepted"] = (all(_significant_param(ev["fit"], [m]) for m in (a, n))
-                                      and all(_beats(scorer, ev, single[m]) for m in (a, n)))
-                    if not ev["accepted"]:
-                        ev["why_not"] = ["one member adds nothing held-out to the other"]
-                _refuse_q_and_rectifier(ev, scorer.vref_V)
-        acc2 = [k for k in pair_scan if pair_scan[k]["accepted"]]
-        if acc2:
-            k = prefer_q_drift(pair_scan, max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"]), scorer.vref_V)
-            final = pair_scan[k]
-            selected = sorted(final["names"], key=lambda n: -single[n]["gain"]["gain"])
-            # look-alike pairs: a pair sharing one member whose held-out gain reaches the best one's interval
-            lo = final["gain"]["ci"][0]
-            for k2, ev in pair_scan.items():
-                if (k2 == k or ev["fit"] is None or ev["gain"]["gain"] < lo or not ev["in_bounds"]
-                        or ev.get("same_signature")):
-                    continue
-                shared = set(ev["names"]) & set(selected)
-                if len(shared) == 1:
-                    kept = shared.pop()
-                    swapped = [m for m in selected if m != kept][0]
-                    alt = [m for m in ev["names"] if m != kept][0]
-                    pair_alternatives.setdefault(swapped, [])
-                    if alt not in pair_alternatives[swapped]:
-                        pair_alternatives[swapped].append(alt)
+        # bound, or extrapolating badly)
+        selected, final, pair_scan, pair_alternatives = pairs_from_scratch(scorer, single)
     return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan,
             "pair_alternatives": pair_alternatives}
+
+
+def pairs_from_scratch(scorer: Scorer, single: dict) -> tuple[list, dict | None, dict, dict]:
+    """Pairs fitted from scratch, each scored against the nominal model and against each member alone.
+
+    Starts from the strongest single candidates (held-out gain, with a passing interval and folds) and the
+    best training fits (an effect whose held-out score suffers from the other one's unmodelled signature -
+    the calibration bent to absorb it - still fits its training window well), each paired with every
+    other deterministic effect (two path effects are not paired: one nonlinear parameter is searched per
+    fit). A pair is accepted when it passes as one candidate would, each member's parameters are
+    significant in the joint fit, and it beats each member alone on held-out data.
+
+    Parameters
+    ----------
+    scorer : Scorer
+    single : dict
+        Single-effect evaluations (:func:`evaluate`) by effect.
+
+    Returns
+    -------
+    tuple
+        ``(selected, final, pair_scan, pair_alternatives)`` as in :func:`attribute` (``[]`` and ``None``
+        when no pair passes).
+    """
+    base = scorer.nominal
+    selected, final, pair_scan, pair_alternatives = [], None, {}, {}
+    fitted = [n for n in single if single[n]["fit"] is not None]
+    starts = sorted((n for n in fitted if single[n]["gain"]["ci"][0] > 0
+                     and scorer.folds_ok(single[n]["gain"])),
+                    key=lambda n: -single[n]["gain"]["gain"])[:PAIR_STARTS]
+    # also the best training fits: an effect whose held-out score suffers from the other one's
+    # unmodelled signature (the calibration bent to absorb it) still fits its training window well
+    starts += [n for n in sorted((n for n in fitted if single[n]["delta_bic"] < DELTA_BIC_MAX),
+                                 key=lambda n: single[n]["delta_bic"])[:PAIR_STARTS + 1] if n not in starts]
+    for a in starts:
+        for n in single:
+            key = "+".join(sorted((a, n)))
+            if n == a or key in pair_scan or (a in NONLINEAR and n in NONLINEAR):
+                continue
+            pair_scan[key] = evaluate(scorer, sorted((a, n)), base, scorer.nominal_train_pred)
+            # both must matter: each one's parameters significant in the joint fit, and the pair
+            # must beat each member alone on held-out data (as a forward-selected second effect
+            # must beat the first): two look-alikes fitted against each other otherwise follow noise
+            ev = pair_scan[key]
+            if ev["accepted"]:
+                ev["accepted"] = (all(_significant_param(ev["fit"], [m]) for m in (a, n))
+                                  and all(_beats(scorer, ev, single[m]) for m in (a, n)))
+                if not ev["accepted"]:
+                    ev["why_not"] = ["one member adds nothing held-out to the other"]
+            _refuse_q_and_rectifier(ev, scorer.vref_V)
+    acc2 = [k for k in pair_scan if pair_scan[k]["accepted"]]
+    if acc2:
+        k = prefer_q_drift(pair_scan, max(acc2, key=lambda k: pair_scan[k]["gain"]["gain"]), scorer.vref_V)
+        final = pair_scan[k]
+        selected = sorted(final["names"], key=lambda n: -single[n]["gain"]["gain"])
+        # look-alike pairs: a pair sharing one member whose held-out gain reaches the best one's interval
+        lo = final["gain"]["ci"][0]
+        for k2, ev in pair_scan.items():
+            if (k2 == k or ev["fit"] is None or ev["gain"]["gain"] < lo or not ev["in_bounds"]
+                    or ev.get("same_signature")):
+                continue
+            shared = set(ev["names"]) & set(selected)
+            if len(shared) == 1:
+                kept = shared.pop()
+                swapped = [m for m in selected if m != kept][0]
+                alt = [m for m in ev["names"] if m != kept][0]
+                pair_alternatives.setdefault(swapped, [])
+                if alt not in pair_alternatives[swapped]:
+                    pair_alternatives[swapped].append(alt)
+    return selected, final, pair_scan, pair_alternatives
 
 
 def in_sample(scorer: Scorer, names: tuple = DETERMINISTIC, n_best: int = 3) -> list[dict]:
