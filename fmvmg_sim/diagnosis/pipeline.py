@@ -463,14 +463,14 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     if closure and closure["open"] and len(att["selected"]) == 1:
         # one effect explains part of the located gap, not where it lies: it may be a bystander that two
         # strong effects, each failing alone on the other's signature, let through (as when no single effect
-        # passes); a pair fitted from scratch replaces it when it passes and gains more held-out
+        # passes); a pair fitted from scratch replaces it when it passes and gains more held-out (the flicker
+        # band stays as judged on what the single effect left: not accepted, as the closure was judged)
         sel2, fin2, scan2, alts2 = pairs_from_scratch(scorer, att["single"])
         if fin2 is not None and (scorer.gain(fin2["preds"], scorer.nominal)["gain"]
                                  > scorer.gain(att["final"]["preds"], scorer.nominal)["gain"]):
             log(f"pair from scratch {'+'.join(sel2)} replaces {att['selected'][0]} (the located gap stayed open)")
             att = dict(att, selected=sel2, final=fin2, pair_scan=scan2, pair_alternatives=alts2,
                        replaced_partial=att["selected"][0])
-            final_pred_ho = fin2["preds"]["heldout"]
             final_pred_tr = fin2["fit"]._ctx["pred"]
             closure = _closure(prep, fitter, att, final_pred_tr, sig_located, flick_ok, localization, st_null)
     accepted = (["quantization"] if q else []) + att["selected"] + (["flicker_noise"] if flick_ok else [])
