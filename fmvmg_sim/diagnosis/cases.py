@@ -550,12 +550,14 @@ def noise_model(record, device_nominal, theta: dict) -> list:
     return out
 
 
-def _truth_fitter(record_path, device_nominal, theta: dict, det: dict):
-    """A :class:`~.fitting.Fitter` on the record's profile whose observations are the noise-free quasi-static
-    truth of the device ``theta`` with the deterministic effects ``det`` (absent channels stay absent)."""
+def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict) -> tuple:
+    """``(fit, cal)``: a :class:`~.fitting.Fitter` on the record's profile whose observations are the noise-free
+    quasi-static truth of the device ``theta`` with the deterministic effects ``det`` (absent channels stay
+    absent), and the nominal knobs calibrated to it on every block."""
     from ..averaged import scale_factor_V_per_dps
     from ..diagram import build_diagram
     from ..record import read_record
+    from .calibrate import calibrate
     from .data import prepare
     from .fitting import PATH_EFFECTS, Fitter
     rec = read_record(record_path, warn_unknown=False)
@@ -565,7 +567,7 @@ def _truth_fitter(record_path, device_nominal, theta: dict, det: dict):
     truth = fit.table(theta, det, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
     truth[:, ~fit.present] = np.nan
     fit.Y = truth
-    return fit
+    return fit, calibrate(fit, np.ones(fit.prep.n_blocks, bool))
 
 
 def _whitened_norm(fit, pred: np.ndarray, noise: list) -> float:
@@ -616,13 +618,11 @@ def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effec
     """
     if not effects:
         return 0.0
-    from .calibrate import calibrate
     snr_noise = _noise_level_snr(effects, device_nominal)
     det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
     if not det:
         return snr_noise
-    fit = _truth_fitter(record_path, device_nominal, theta, det)
-    cal = calibrate(fit, np.ones(fit.prep.n_blocks, bool))
+    fit, cal = _calibrated_truth(record_path, device_nominal, theta, det)
     if noise is None:
         return float(max(np.sqrt(cal.solution.cost), snr_noise))
     return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise), snr_noise))
@@ -662,12 +662,10 @@ def snr_beyond(record_path, device_nominal, theta: dict, effects: dict, noise: l
     float
         0 when ``effects`` has no deterministic effect.
     """
-    from .calibrate import calibrate
     det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
     if not det:
         return 0.0
-    fit = _truth_fitter(record_path, device_nominal, theta, det)
-    cal = calibrate(fit, np.ones(fit.prep.n_blocks, bool))
+    fit, cal = _calibrated_truth(record_path, device_nominal, theta, det)
     return _snr_beyond(fit, cal, [n for n in explained_by if n not in NOISE_LEVEL], noise)
 
 
@@ -699,13 +697,11 @@ def separable_snr(record_path, device_nominal, theta: dict, effects: dict, noise
         Effect -> SNR beyond its partner (``snr_by`` for a single effect, or where the partner's fit
         leaves the model's domain).
     """
-    from .calibrate import calibrate
     out = dict(snr_by)
     det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
     if len(effects) != 2 or len(det) != 2:
         return out
-    fit = _truth_fitter(record_path, device_nominal, theta, det)
-    cal = calibrate(fit, np.ones(fit.prep.n_blocks, bool))
+    fit, cal = _calibrated_truth(record_path, device_nominal, theta, det)
     for n in det:
         try:
             out[n] = _snr_beyond(fit, cal, [m for m in det if m != n], noise)
