@@ -466,8 +466,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         # passes); a pair fitted from scratch replaces it when it passes and gains more held-out (the flicker
         # band stays as judged on what the single effect left: not accepted, as the closure was judged)
         sel2, fin2, scan2, alts2 = pairs_from_scratch(scorer, att["single"])
-        if fin2 is not None and (scorer.gain(fin2["preds"], scorer.nominal)["gain"]
-                                 > scorer.gain(att["final"]["preds"], scorer.nominal)["gain"]):
+        # both gains are over the nominal model, on the same folds (the single effect's from the scan)
+        if fin2 is not None and fin2["gain"]["gain"] > att["final"]["gain"]["gain"]:
             log(f"pair from scratch {'+'.join(sel2)} replaces {att['selected'][0]} (the located gap stayed open)")
             att = dict(att, selected=sel2, final=fin2, pair_scan=scan2, pair_alternatives=alts2,
                        replaced_partial=att["selected"][0])
