@@ -3,8 +3,10 @@
 import contextlib
 
 import numpy as np
+import pytest
 
-from fmvmg_sim.diagnosis.attribute import _in_bounds, _significant_param, ambiguity, param_z, separating_experiment
+from fmvmg_sim.diagnosis.attribute import (BOUND_REASON, _significant_param, ambiguity, bound_check, bounds_verdict,
+                                           param_z, separating_experiment)
 from tests.test_diagnosis_helpers import REPO
 
 
@@ -23,9 +25,56 @@ def test_ambiguity_set_is_the_best_ones_interval():
 
 
 def test_pinned_and_zero_bounds():
-    assert _in_bounds({"feedthrough": {"c_ft_fF": 0.0, "tc_per_K": 0.0}})          # zero: "no effect", not a pin
-    assert not _in_bounds({"feedthrough": {"c_ft_fF": 1.0, "tc_per_K": -0.01}})    # at a non-zero bound
-    assert not _in_bounds({"feedthrough": {"c_ft_fF": 1.0, "tc_per_K": 0.02}})     # outside
+    assert bound_check({"feedthrough": {"c_ft_fF": 0.0, "tc_per_K": 0.0}}) == (None, [])   # zero: "no effect"
+    # near a non-zero bound: judged by whether the data pull it past (bounds_verdict)
+    assert bound_check({"feedthrough": {"c_ft_fF": 1.0, "tc_per_K": -0.01}}) == (None, ["feedthrough.tc_per_K"])
+    assert bound_check({"feedthrough": {"c_ft_fF": 1.0, "tc_per_K": 0.02}}) == (BOUND_REASON, [])     # outside
+
+
+def test_relaxation_has_a_floor_of_an_hour_instead_of_a_pin_at_its_lower_bound():
+    # 0.01-1000 h: a thousandth of the range (1 h) put everything under 1.01 h "at" the 0.01 h bound; the
+    # attribution floor says what is meant (relaxation takes hours, warm-up minutes)
+    sr = lambda tau: {"stress_relaxation": {"quad_rel": 0.002, "tau_h": tau}}   # noqa: E731
+    assert bound_check(sr(1.005)) == (None, [])
+    assert bound_check(sr(0.9))[0] == "a relaxation faster than an hour (warm-up-like)"
+    assert bound_check(sr(999.5)) == (BOUND_REASON, [])        # at the upper bound
+    assert bound_check(sr(1500.0)) == (BOUND_REASON, [])       # outside (the refinement can overshoot)
+    # other time constants and widths keep the pin at their lower bound
+    assert bound_check({"thermal_lag": {"tau_s": 13.3, "offset_K": 0.5}}) == (BOUND_REASON, [])
+    assert bound_check({"thermal_hysteresis": {"quad_rel": 0.01, "width_K": 0.55}}) == (BOUND_REASON, [])
+    assert bound_check({"thermal_hysteresis": {"quad_rel": 0.01, "width_K": 5.0}}) == (None, [])
+
+
+def _bounded_fit(g_true):
+    """A temperature-rate term fitted beside an offset knob on synthetic blocks (bounds +-2000; its standard
+    error 0.7)."""
+    from fmvmg_sim.diagnosis.fitting import Fitter, Lin
+    from fmvmg_sim.diagnosis.model import ModelFit
+
+    n = 400
+    x = 1e-2 * np.sin(np.linspace(0.0, 6.0, n))[:, None]        # the term's column (per deg/h per K/min)
+    f = Fitter.__new__(Fitter)
+    f.Y = 0.3 + g_true * x + 0.1 * np.random.default_rng(0).standard_normal((n, 1))
+    f.S, f.present = np.full((n, 1), 0.1), np.ones(1, bool)
+    name = "temperature_rate.g_dph_per_K_per_min"
+    lin = Lin(np.zeros((n, 1)), np.stack([np.ones((n, 1)), x], axis=-1), ["offset", name], np.zeros(2),
+              np.array([np.nan, np.nan]), np.array([-10.0, -2000.0]), np.array([10.0, 2000.0]))
+    sol = f.solve(lin, np.ones(n, bool))
+    mf = ModelFit({"temperature_rate": {"g_dph_per_K_per_min": float(sol.x[1])}}, {}, sol, lin)
+    scorer = type("S", (), {"f": f, "train": np.ones(n, bool)})()
+    return mf, scorer
+
+
+def test_a_parameter_near_its_bound_is_pinned_only_when_the_data_pull_it_past():
+    # an optimum 2 units inside the bound (within the 4-unit tolerance, 3 standard errors in): kept
+    mf, sc = _bounded_fit(1998.0)
+    g = mf.effects["temperature_rate"]["g_dph_per_K_per_min"]
+    assert 1996.0 < g < 2000.0 and bound_check(mf.effects) == (None, ["temperature_rate.g_dph_per_K_per_min"])
+    assert bounds_verdict(sc, mf) == (True, None)
+    # the data pull it 140 standard errors past: held at the bound and pinned
+    mf, sc = _bounded_fit(2100.0)
+    assert mf.effects["temperature_rate"]["g_dph_per_K_per_min"] == pytest.approx(2000.0)
+    assert bounds_verdict(sc, mf) == (False, BOUND_REASON)
 
 
 def test_why_not_names_each_failed_criterion():

@@ -205,12 +205,12 @@ def test_separable_snr_is_what_the_partner_cannot_explain(tmp_path):
 def test_scaled_cases_stay_clear_of_physical_bounds():
     # a case's amplitude scaled past its bound is clipped inside it, where the diagnosis's
     # "not pinned at a bound" rule can accept a right answer; time constants are left alone
-    from fmvmg_sim.diagnosis.attribute import _in_bounds
+    from fmvmg_sim.diagnosis.attribute import bound_check
     from fmvmg_sim.diagnosis.cases import scaled
     eff = scaled({"stress_relaxation": {"quad_rel": -0.1, "tau_h": 20.0}}, 5.0)
     assert -0.2 < eff["stress_relaxation"]["quad_rel"] <= -0.19 and eff["stress_relaxation"]["tau_h"] == 20.0
-    assert _in_bounds(eff)
-    assert not _in_bounds({"stress_relaxation": {"quad_rel": -0.2, "tau_h": 20.0}})
+    assert bound_check(eff) == (None, [])
+    assert bound_check({"stress_relaxation": {"quad_rel": -0.2, "tau_h": 20.0}}) == (None, ["stress_relaxation.quad_rel"])
 
 
 def test_case_mix_checks_its_choices():
