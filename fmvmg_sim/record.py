@@ -170,8 +170,10 @@ def read_record(path: str | os.PathLike, required: tuple[str, ...] = REQUIRED_CO
     body_lines = lines[header_idx + 1:]
     data = None
     try:  # fast path: numpy's C parser on clean numeric data
-        data = np.loadtxt(io.StringIO("\n".join(body_lines)), delimiter=",", ndmin=2,
-                          dtype=float, comments="#")
+        with warnings.catch_warnings():  # an empty body is named below, not in numpy's words
+            warnings.simplefilter("ignore", UserWarning)
+            data = np.loadtxt(io.StringIO("\n".join(body_lines)), delimiter=",", ndmin=2,
+                              dtype=float, comments="#")
         if data.size and data.shape[1] != ncol:
             data = None
     except ValueError:

@@ -27,6 +27,15 @@ def test_missing_column(tmp_path, capsys):
     assert rc == 2 and "temperature_C" in err and "r.csv" in err
 
 
+def test_header_without_rows(tmp_path, capsys):
+    # named in our words, with no numpy warning leaking onto the terminal before it
+    p = tmp_path / "r.csv"
+    p.write_text("time_s,temperature_C,rate_dps\n")
+    rc, err = _run(capsys, p, "-o", tmp_path / "o")
+    assert rc == 2 and "no data rows" in err and "r.csv" in err
+    assert "warning" not in err and not (tmp_path / "o").exists()
+
+
 def test_non_monotonic_time(tmp_path, capsys):
     p = tmp_path / "r.csv"
     p.write_text("time_s,temperature_C,rate_dps\n0.1,25,0.0\n0.3,25,0.0\n0.2,25,0.0\n")
