@@ -5,8 +5,8 @@ import contextlib
 import numpy as np
 import pytest
 
-from fmvmg_sim.diagnosis.attribute import (BOUND_REASON, _significant_param, ambiguity, bound_check, bounds_verdict,
-                                           param_z, separating_experiment)
+from fmvmg_sim.diagnosis.attribute import (BOUND_REASON, FOLDS_REASON, _significant_param, ambiguity, bound_check,
+                                           bounds_verdict, located_gap_candidate, param_z, separating_experiment)
 from tests.test_diagnosis_helpers import REPO
 
 
@@ -22,6 +22,18 @@ def test_ambiguity_set_is_the_best_ones_interval():
              "thermal_lag": _ev(8.0, 3.0, fit=False)}                              # no fit
     assert ambiguity(evals, "q_factor_drift") == ["reference_drift"]
     assert ambiguity(evals, "reference_drift") == ["q_factor_drift"]
+
+
+def test_a_located_gap_is_named_by_an_effect_that_fails_only_the_fold_count():
+    def ev(gain, why, fit=True):
+        return {"gain": {"gain": gain, "ci": [0.1, 2 * gain]}, "fit": object() if fit else None, "why_not": why}
+    single = {"feedthrough": ev(1.97, [FOLDS_REASON]), "temperature_rate": ev(0.22, [FOLDS_REASON]),
+              "thermal_hysteresis": ev(5.0, ["held-out gain interval reaches zero", FOLDS_REASON]),
+              "mode_split_drift": ev(9.0, [FOLDS_REASON, "dBIC not below -10"]),
+              "duffing": ev(50.0, [FOLDS_REASON], fit=False)}
+    assert located_gap_candidate(single) == "feedthrough"        # the largest gain of those failing only that
+    del single["feedthrough"], single["temperature_rate"]
+    assert located_gap_candidate(single) is None                 # every other one fails more
 
 
 def test_pinned_and_zero_bounds():

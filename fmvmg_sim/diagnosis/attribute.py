@@ -66,6 +66,9 @@ PIN_CHI2 = 3.84
 #: relaxation).
 ATTRIBUTION_FLOOR = {("stress_relaxation", "tau_h"): (1.0, "a relaxation faster than an hour (warm-up-like)")}
 BOUND_REASON = "a parameter outside or pinned at its physical bound"
+#: The fold-count criterion's reason (:func:`why_not`); alone, it does not stop an effect from naming a gap the
+#: localisation has already established (:func:`located_gap_candidate`).
+FOLDS_REASON = "too few held-out folds pass"
 #: A fold passes when its held-out log-likelihood gain (summed over its blocks) is at least this (odds of
 #: 20:1) with a bootstrap interval above zero: a smooth candidate that differs from the baseline by a
 #: hair has a "significant" but worthless gain of a fraction of a nat.
@@ -543,7 +546,7 @@ def why_not(ev: dict, folds_ok: bool) -> list[str]:
     if not ev["gain"]["ci"][0] > 0:
         out.append("held-out gain interval reaches zero")
     if not folds_ok:
-        out.append("too few held-out folds pass")
+        out.append(FOLDS_REASON)
     if not ev["delta_bic"] < DELTA_BIC_MAX:
         out.append(f"dBIC not below {DELTA_BIC_MAX:g}")
     if not ev["in_bounds"]:
@@ -890,6 +893,31 @@ def _beats(scorer: Scorer, ev: dict, other: dict) -> bool:
         return True
     g = scorer.gain(ev["preds"], other["preds"])
     return bool(g["ci"][0] > 0 and scorer.folds_ok(g))
+
+
+def located_gap_candidate(single: dict) -> str | None:
+    """The effect that names a located gap no effect was accepted for, if one fails only the fold count.
+
+    The fold-count criterion (at least 2 of the folds that can test a candidate pass on their own, or the
+    testable folds together) guards against a candidate that wins a pooled held-out interval on one lucky
+    stretch when nothing says there is a gap at all. Once the localisation has found a gap beyond the null band
+    (Holm-corrected), the question left is which effect it is. A candidate whose pooled held-out interval is
+    above zero, whose Delta-BIC, bounds and parameter significance pass, and which fails only the fold count
+    then answers it, on a record whose design leaves one or two scored folds (a first training window at one
+    temperature, a fold tested wholly by extrapolation). The closure check still says whether it closes the gap.
+
+    Parameters
+    ----------
+    single : dict
+        Evaluations by effect (:func:`evaluate`), none of them accepted.
+
+    Returns
+    -------
+    str or None
+        The one with the largest pooled held-out gain, or None.
+    """
+    cands = [n for n, ev in single.items() if ev.get("fit") is not None and ev.get("why_not") == [FOLDS_REASON]]
+    return max(cands, key=lambda n: single[n]["gain"]["gain"]) if cands else None
 
 
 def ambiguity(single: dict, best: str) -> list[str]:

@@ -18,8 +18,9 @@ from ..errors import InputError
 from ..record import Record, read_record
 from ..scenario import Scenario, load_scenario
 from . import localize as loc
-from .attribute import (INDETERMINATE_SD, MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, Scorer, ambiguity, attribute,
-                        in_sample, pairs_from_scratch, rejudge_second, separating_experiment)
+from .attribute import (FOLDS_REASON, INDETERMINATE_SD, MIN_TRAIN_SPAN_K, TEMPERATURE_DRIVEN, Scorer, ambiguity,
+                        attribute, in_sample, located_gap_candidate, pairs_from_scratch, rejudge_second,
+                        separating_experiment)
 from .calibrate import calibrate
 from .converter import Converter, lattice_noise, staircase_visible
 from .data import CONVERTER_CHANNELS, ON_LATTICE_MIN, Prepared, difference_sigma, lattice_lsb, prepare
@@ -473,6 +474,15 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                        replaced_partial=att["selected"][0])
             final_pred_tr = fin2["fit"]._ctx["pred"]
             closure = _closure(prep, fitter, att, final_pred_tr, sig_located, flick_ok, localization, st_null)
+    if sig and not (q or flick_ok or att["selected"]):
+        # a gap the localisation established and no effect was accepted for: an effect that fails only the fold
+        # count names it (a record whose design leaves few scored folds); the closure check judges it as any
+        best = located_gap_candidate(att["single"])
+        if best is not None:
+            log(f"{best} names the located gap (it fails only the fold count)")
+            att = dict(att, selected=[best], final=att["single"][best], located_gap=best)
+            final_pred_tr = att["final"]["fit"]._ctx["pred"]
+            closure = _closure(prep, fitter, att, final_pred_tr, sig_located, flick_ok, localization, st_null)
     accepted = (["quantization"] if q else []) + att["selected"] + (["flicker_noise"] if flick_ok else [])
     accepted = accepted[:2]
     # ambiguity sets and separating experiments
@@ -531,6 +541,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         r["accepted"] = r["effect"] in accepted
         if r["accepted"]:
             r.pop("why_not", None)
+            if r["effect"] == att.get("located_gap"):
+                r["accepted_on"] = ("a located gap no effect passed for: every criterion but the fold count "
+                                    f"({FOLDS_REASON})")
         elif r["effect"] == "flicker_noise" and flick_ok:
             r["why_not"] = ["at most two effects are reported"]
         elif r["effect"] == "flicker_noise":
@@ -554,7 +567,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
         "closure": closure, "in_sample_candidates": hint, "design": design,
-        "replaced_partial": att.get("replaced_partial"),
+        "replaced_partial": att.get("replaced_partial"), "located_gap": att.get("located_gap"),
         "primary_metric": primary, "combined": combined,
         "calibration": cal.to_json(),
         "record": {"path": str(record_path), "samples": len(prep.t_s), "duration_s": prep.duration_s,

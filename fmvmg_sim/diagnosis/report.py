@@ -96,6 +96,10 @@ def markdown(rep: dict) -> str:
     """
     L = [f"# Sim-to-real gap diagnosis: {rep['record']['path']}", "",
          f"**Verdict: {rep['verdict']}**" + (f" - accepted: {', '.join(rep['accepted'])}" if rep["accepted"] else ""), ""]
+    if rep.get("located_gap"):
+        L += [f"{rep['located_gap']} names a gap the localisation found (section 2) and no effect passed for: it "
+              "passes every held-out criterion but the fold count, on a record whose design leaves few scored "
+              "folds. Weaker evidence than a full pass; a record that repeats its temperature excursion tests it.", ""]
     if rep["ambiguous_with"]:
         L.append("## Ambiguity")
         for a, others in rep["ambiguous_with"].items():
