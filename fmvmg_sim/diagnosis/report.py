@@ -98,8 +98,9 @@ def markdown(rep: dict) -> str:
          f"**Verdict: {rep['verdict']}**" + (f" - accepted: {', '.join(rep['accepted'])}" if rep["accepted"] else ""), ""]
     if rep.get("located_gap"):
         L += [f"{rep['located_gap']} names a gap the localisation found (section 2) and no effect passed for: it "
-              "passes every held-out criterion but the fold count, on a record whose design leaves few scored "
-              "folds. Weaker evidence than a full pass; a record that repeats its temperature excursion tests it.", ""]
+              "passes every held-out criterion but the fold count (its pooled held-out gain is above zero, but too few "
+              "of the folds that can test it pass on their own). Weaker evidence than a full pass; a record that "
+              "repeats its temperature excursion tests it.", ""]
     if rep["ambiguous_with"]:
         L.append("## Ambiguity")
         for a, others in rep["ambiguous_with"].items():
