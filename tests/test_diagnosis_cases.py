@@ -371,3 +371,19 @@ def test_a_partial_single_effect_gives_way_to_a_stronger_pair(tmp_path):
     assert rep["replaced_partial"] == "quadrature_drift" and rep["verdict"] == "explained"
     row = next(r for r in rep["ranked"] if r["effect"] == "quadrature_drift")
     assert not row["accepted"] and "pair fitted from scratch" in row["why_not"][0]
+
+
+def test_a_located_gap_is_named_by_an_effect_that_fails_only_the_fold_count(tmp_path):
+    # benchmark case 90001/22 (regenerated from its seed): a feedthrough of SNR 62 on a record whose first training
+    # window holds one temperature and whose second fold is tested wholly by extrapolation; its pooled held-out
+    # interval is above zero but its one testable fold does not pass alone, and nothing else passes. The
+    # localisation finds the gap (quadrature channel), so the feedthrough names it, flagged as weaker evidence
+    from fmvmg_sim.diagnosis.cases import make_case
+    from fmvmg_sim.diagnosis.report import markdown
+    lab = make_case(22, 90001, tmp_path, str(NOMINAL))
+    assert list(lab["effects"]) == ["feedthrough"] and lab["tier"] == "above"
+    rep = diagnose(lab["record"], NOMINAL, n_null=4, progress=False)
+    assert rep["accepted"] == ["feedthrough"] and rep["located_gap"] == "feedthrough", (rep["accepted"], rep["verdict"])
+    row = next(r for r in rep["ranked"] if r["effect"] == "feedthrough")
+    assert "fold count" in row["accepted_on"] and row["heldout_gain"] > 0
+    assert "names a gap the localisation found" in markdown(rep)
