@@ -87,6 +87,12 @@ def test_a_parameter_near_its_bound_is_pinned_only_when_the_data_pull_it_past():
     mf, sc = _bounded_fit(2100.0)
     assert mf.effects["temperature_rate"]["g_dph_per_K_per_min"] == pytest.approx(2000.0)
     assert bounds_verdict(sc, mf) == (False, BOUND_REASON)
+    # judged on the blocks the fit was made on (the in-sample hint fits the whole record, not the training
+    # window): an interior optimum on all blocks stays kept when the scorer's training window is shorter
+    mf, sc = _bounded_fit(1998.0)
+    all_rows = sc.train.copy()
+    sc.train = np.arange(len(all_rows)) < len(all_rows) // 3
+    assert bounds_verdict(sc, mf, all_rows) == (True, None)
 
 
 def test_why_not_names_each_failed_criterion():

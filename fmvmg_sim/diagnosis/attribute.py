@@ -402,7 +402,7 @@ def bound_check(eff: dict) -> tuple[str | None, list]:
     return None, near
 
 
-def bounds_verdict(scorer: "Scorer", mf: ModelFit) -> tuple[bool, str | None]:
+def bounds_verdict(scorer: "Scorer", mf: ModelFit, rows: np.ndarray | None = None) -> tuple[bool, str | None]:
     """Whether a fit's parameters are admissible: inside their physical bounds and not pinned at one.
 
     * Outside ``[lo, hi]``, or a time constant or width within :data:`PIN_TOLERANCE` of a bound: not admissible.
@@ -420,8 +420,11 @@ def bounds_verdict(scorer: "Scorer", mf: ModelFit) -> tuple[bool, str | None]:
     Parameters
     ----------
     scorer : Scorer
-        Its fitter and training blocks (the ones ``mf`` was fitted on).
+        Its fitter (and training blocks, the default ``rows``).
     mf : ModelFit
+    rows : ndarray of bool, optional
+        The blocks ``mf`` was fitted on (default the training blocks): the bound-lifted fit must be solved on
+        the same ones for the two chi-squares to compare.
 
     Returns
     -------
@@ -430,12 +433,12 @@ def bounds_verdict(scorer: "Scorer", mf: ModelFit) -> tuple[bool, str | None]:
         Why not, for :func:`why_not`.
     """
     reason, near = bound_check(mf.effects)
-    if reason is None and near and _strained(scorer, mf, near) > PIN_CHI2:
+    if reason is None and near and _strained(scorer, mf, near, scorer.train if rows is None else rows) > PIN_CHI2:
         reason = BOUND_REASON
     return reason is None, reason
 
 
-def _strained(scorer: "Scorer", mf: ModelFit, names: list) -> float:
+def _strained(scorer: "Scorer", mf: ModelFit, names: list, rows: np.ndarray) -> float:
     """Training chi-square (noise model) the fit gains when the bounds of the ``names`` parameters are lifted."""
     lin = mf.lin
     idx = [lin.names.index(nm) for nm in names if nm in lin.names]
@@ -443,7 +446,7 @@ def _strained(scorer: "Scorer", mf: ModelFit, names: list) -> float:
         return 0.0
     lo, hi = lin.lo.copy(), lin.hi.copy()
     lo[idx], hi[idx] = -np.inf, np.inf
-    free = scorer.f.solve(dataclasses.replace(lin, lo=lo, hi=hi), scorer.train)
+    free = scorer.f.solve(dataclasses.replace(lin, lo=lo, hi=hi), rows)
     return float(mf.solution.cost - free.cost)
 
 
@@ -720,7 +723,7 @@ def in_sample(scorer: Scorer, names: tuple = DETERMINISTIC, n_best: int = 3) -> 
             continue
         dbic = scorer.delta_bic(mf._ctx["pred"], base, len(MODELS[n]), rows=rows)
         z = param_z(mf, [n])
-        if dbic < DELTA_BIC_MAX and z > PARAM_Z_MIN and bounds_verdict(scorer, mf)[0]:
+        if dbic < DELTA_BIC_MAX and z > PARAM_Z_MIN and bounds_verdict(scorer, mf, rows)[0]:
             out.append({"effect": n, "params": mf.effects[n], "delta_bic": float(dbic), "param_z": float(z)})
     return sorted(out, key=lambda r: r["delta_bic"])[:n_best]
 
