@@ -183,3 +183,13 @@ def test_heating_minus_cooling_floor_is_the_chi_square_spread():
     assert not loc.compare(st(0.1535), [st(v) for v in vals])["regimes"][name]["significant"]
     # a gap twenty times the null's still is
     assert loc.compare(st(20 * 0.053), [st(v) for v in vals])["regimes"][name]["significant"]
+
+
+def test_a_record_far_below_its_null_is_marked_not_comparable():
+    # null replicates whose channel mean square is ~100 times the record's (log spread 0.1): z ~ -44, beyond any
+    # sampling spread; the channel "b" sits inside its null and stays comparable
+    nulls = [{"channels": {"a": 100.0 * np.exp(0.1 * e), "b": np.exp(0.1 * e)}, "allan_bands": {}, "regimes": {}}
+             for e in (-1.5, -0.5, 0.5, 1.5)]
+    out = loc.compare({"channels": {"a": 1.0, "b": np.exp(-0.2)}, "allan_bands": {}, "regimes": {}}, nulls)["channels"]
+    assert out["a"]["z"] < loc.NOT_COMPARABLE_Z and not out["a"]["comparable"] and not out["a"]["significant"]
+    assert out["b"]["comparable"] and -3.0 < out["b"]["z"] < 0.0

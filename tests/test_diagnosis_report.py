@@ -59,3 +59,22 @@ def test_the_undetermined_note_reads_its_threshold_from_the_settings():
     md = markdown(rep)
     assert "| 2 / 2 (1 undetermined) |" in md
     assert "uncertain by more than 7.5 noise sigmas" in md
+
+
+def test_a_statistic_its_null_does_not_describe_is_named_in_the_localisation():
+    from fmvmg_sim.diagnosis.report import markdown
+    fd = {"z": -97.3, "p_holm": 1.0, "significant": False, "comparable": False}
+    rate = {"z": 0.4, "p_holm": 1.0, "significant": False, "comparable": True}
+    rep = {"verdict": "none", "accepted": [], "ambiguous_with": {}, "ranked": [],
+           "localization": {"channels": {"rate_V": rate, "drive_frequency_Hz": fd}, "allan_bands": {}, "regimes": {}},
+           "remainder": None,
+           "record": {"path": "r.csv", "samples": 10800, "duration_s": 10800.0, "sample_interval_s": 1.0,
+                      "channels": ["rate_V"], "issues": {}, "folds": []},
+           "calibration": {"parameters": {}}, "settings": {}}
+    md = markdown(rep)
+    assert "| channels | drive_frequency_Hz | -97.30 | 1 | not comparable |" in md
+    assert "| channels | rate_V | 0.40 | 1 | no |" in md
+    assert "Not comparable: drive_frequency_Hz." in md
+    # a report written before the flag existed reads as before
+    del fd["comparable"]
+    assert "Not comparable" not in markdown(rep)

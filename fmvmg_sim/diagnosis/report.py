@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 from ..record import atomic_write_text
+from . import localize as loc
 
 
 def clean(obj):
@@ -146,9 +147,20 @@ def markdown(rep: dict) -> str:
               f"({', '.join(rep['calibration']['at_bound'])}): the nominal model alone cannot reproduce the record."]
     L += ["", "## 2. Where the gap lies (against the re-simulated null, Holm-corrected)", "",
           "| group | statistic | z | p (Holm) | significant |", "|---|---|---|---|---|"]
+    off = []
     for g in ("channels", "allan_bands", "regimes"):
         for n, d in rep["localization"][g].items():
-            L.append(f"| {g} | {n} | {d['z']:.2f} | {d['p_holm']:.2g} | {'**yes**' if d['significant'] else 'no'} |")
+            sig = "**yes**" if d["significant"] else "no"
+            if not d.get("comparable", True):
+                sig, off = "not comparable", off + [n]
+            L.append(f"| {g} | {n} | {d['z']:.2f} | {d['p_holm']:.2g} | {sig} |")
+    if off:
+        L += ["", f"Not comparable: {', '.join(off)}. The record lies more than {-loc.NOT_COMPARABLE_Z:g} null standard "
+              "deviations below its null there: the null replicates carry something the record does not, and a gap in "
+              "that statistic cannot be located from this null (its attribution scoring is not affected). For the drive "
+              "frequency on a record with temperature ramps this is the null's own artefact: its replicates run on the "
+              "temperature thinned to a point per 5 s, which cuts every ramp corner (a known limitation, README: "
+              "'What fails')."]
     L += ["", "## 3. Attribution (held-out, forward-chained)", "",
           "| effect | accepted | params | held-out gain [CI] | folds passed / can test | dBIC | gap before | after | shrink "
           "| why not |",
