@@ -489,3 +489,26 @@ def test_a_fold_whose_candidate_refit_is_undetermined_cannot_test_it():
     calls = iter([0, 0, 0])
     allwild = sc.gain(sc.fold_predictions(lambda rows: refit(next(calls))), base)
     assert all(f["used"] for f in allwild["folds"]) and allwild["ci"][1] < 0
+
+
+def test_a_relaxation_below_its_floor_is_refused_only_when_the_data_pull_it_there():
+    # a relaxation of 1.36 h fitted at 0.98 h (seed 90070 case 37) is not warm-up: held at the 1 h floor the
+    # training chi-square rises by less than PIN_CHI2; one fitted at 0.013 h whose cost rises by 400 is refused
+    from types import SimpleNamespace
+
+    from fmvmg_sim.diagnosis.attribute import PIN_CHI2, bounds_verdict
+    from fmvmg_sim.diagnosis.model import ModelFit
+
+    def fit(tau, strain):
+        mf = ModelFit({"stress_relaxation": {"quad_rel": 2e-4, "tau_h": tau}}, {},
+                      SimpleNamespace(cost=100.0), None)
+        mf._ctx["cost_at"] = lambda over, rows: 100.0 + (strain if over == {"stress_relaxation": 1.0} else np.nan)
+        return mf
+
+    scorer = SimpleNamespace(train=np.ones(4, bool))
+    assert bounds_verdict(scorer, fit(0.98, 0.5 * PIN_CHI2)) == (True, None)
+    assert bounds_verdict(scorer, fit(0.013, 400.0)) == (False, "a relaxation faster than an hour (warm-up-like)")
+    # a fit that cannot re-solve (no cost_at) keeps the floor as it was
+    mf = fit(0.98, 0.0)
+    del mf._ctx["cost_at"]
+    assert bounds_verdict(scorer, mf)[0] is False

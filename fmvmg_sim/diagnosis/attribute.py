@@ -18,7 +18,8 @@ accepted when
 * Delta-BIC on the training window is below -10;
 * its parameters lie inside their physical bounds and are not pinned at one: a linear parameter at a non-zero
   bound is pinned when the training data pull it past the bound (:func:`bounds_verdict`), a time constant or
-  width when it sits at its bound; a stress relaxation is attributed from an hour up (:data:`ATTRIBUTION_FLOOR`);
+  width when it sits at its bound; a stress relaxation is attributed from an hour up (:data:`ATTRIBUTION_FLOOR`),
+  a faster fit refused only when the data pull it below the hour;
 * at least one of its linear parameters is more than 2 noise-model standard errors from "no effect" (with the
   parameters the fit holds at a bound fixed: :class:`~.fitting.Solution`).
 
@@ -415,7 +416,9 @@ def bounds_verdict(scorer: "Scorer", mf: ModelFit, rows: np.ndarray | None = Non
     * A stress relaxation faster than an hour (:data:`ATTRIBUTION_FLOOR`) is not admissible: relaxation takes
       hours to days, warm-up 5-30 min (physics.md section 4), and the library does not model warm-up. The
       floor replaces the pin at the simulator's 0.01 h bound, which a tolerance of a thousandth of the
-      0.01-1000 h range had made a floor at 1.01 h by accident.
+      0.01-1000 h range had made a floor at 1.01 h by accident. Like a pin, the floor holds only when the data
+      pull the fit below it: held at the floor, the training chi-square rises by more than :data:`PIN_CHI2`
+      (a relaxation of 1.3-1.8 h is often fitted at 0.8-0.98 h on a 3 h record; pre-registration 17).
 
     Parameters
     ----------
@@ -433,9 +436,31 @@ def bounds_verdict(scorer: "Scorer", mf: ModelFit, rows: np.ndarray | None = Non
         Why not, for :func:`why_not`.
     """
     reason, near = bound_check(mf.effects)
-    if reason is None and near and _strained(scorer, mf, near, scorer.train if rows is None else rows) > PIN_CHI2:
+    rows = scorer.train if rows is None else rows
+    if reason is not None and reason in {why for _, why in ATTRIBUTION_FLOOR.values()}:
+        # below an attribution floor: refused only when the data pull it there, as a pin is (a relaxation of
+        # 1.36 h fitted at 0.98 h is not warm-up)
+        if _below_floor_strain(mf, rows) <= PIN_CHI2:
+            reason, near = bound_check({n: _at_floor(n, ps) for n, ps in mf.effects.items()})
+    if reason is None and near and _strained(scorer, mf, near, rows) > PIN_CHI2:
         reason = BOUND_REASON
     return reason is None, reason
+
+
+def _at_floor(name: str, params: dict) -> dict:
+    """``params`` with any parameter below its attribution floor set to the floor."""
+    return {p: max(v, ATTRIBUTION_FLOOR[(name, p)][0]) if (name, p) in ATTRIBUTION_FLOOR else v
+            for p, v in params.items()}
+
+
+def _below_floor_strain(mf: ModelFit, rows: np.ndarray) -> float:
+    """Training chi-square (noise model) the fit loses when its parameters below an attribution floor are held at
+    the floor (``inf`` when the fit cannot say)."""
+    over = {n: ATTRIBUTION_FLOOR[(n, p)][0] for (n, p) in ATTRIBUTION_FLOOR
+            if n in mf.effects and mf.effects[n][p] < ATTRIBUTION_FLOOR[(n, p)][0]}
+    if not over or "cost_at" not in mf._ctx:
+        return float("inf")
+    return float(mf._ctx["cost_at"](over, rows) - mf.solution.cost)
 
 
 def _strained(scorer: "Scorer", mf: ModelFit, names: list, rows: np.ndarray) -> float:

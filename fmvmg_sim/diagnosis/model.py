@@ -306,6 +306,9 @@ class EffectModel:
         mf = ModelFit(eff, theta, sol, lin, sd, sd_noise)
         mf._ctx["refit"] = refit
         mf._ctx["pred"] = lin.predict(sol.x)
+        # the training cost with a nonlinear parameter held elsewhere (the linear ones re-solved): how hard the
+        # data pull it to where it was fitted (attribute.bounds_verdict, the attribution floor)
+        mf._ctx["cost_at"] = lambda over, r: self.f.solve(self._lin({**nl, **over}), r).cost
         return mf
 
     def fixed_nonlinear(self, eff: dict) -> dict:
