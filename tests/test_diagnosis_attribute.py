@@ -176,6 +176,37 @@ def test_fold_rule_testable_folds_together():
     assert not sc.folds_ok(g(fold(3.5, 40.0), fold(4.0, 40.0)))
 
 
+def test_fold_rule_folds_that_carry_it_join_the_combined_test():
+    """A near-limit ramp-rate term (development case 90070/1): the one fold that can test it alone gains 8.0 of
+    the 12.5 nats expected, not enough to pass; a fold expecting 9.0 gains 12.5. Together they stand 3.1 scatters
+    above zero, so the candidate is carried; folds below FOLD_JOIN_NATS stay out of the sum."""
+    from fmvmg_sim.diagnosis.attribute import FOLD_JOIN_NATS, FOLDS_COMBINED_Z, Scorer
+
+    sc = Scorer.__new__(Scorer)
+    sc.folds_needed = 2
+
+    def fold(total, info, passed=False, consistent=True, used=True):
+        return {"testable": info >= 10.0 and used, "passed": passed, "consistent": consistent, "total": total,
+                "info_if_true": info, "used": used}
+
+    def g(*folds):
+        return {"folds": list(folds), "folds_passed": sum(f["passed"] for f in folds)}
+    assert FOLD_JOIN_NATS < 8.96 < 10.0
+    assert 20.48 >= FOLDS_COMBINED_Z * (2 * (12.48 + 8.96)) ** 0.5
+    case = g(fold(12.48, 8.96, passed=True), fold(8.0, 12.47), fold(0.65, 2.1))
+    assert sc.folds_ok(case)
+    # the same gains where only the testable fold carries enough of it: one fold decides, and it did not pass
+    assert not sc.folds_ok(g(fold(12.48, 4.0, passed=True), fold(8.0, 12.47), fold(0.65, 2.1)))
+    # a joining fold that loses, or gains far more than the candidate could, contradicts it
+    assert not sc.folds_ok(g(fold(-1.0, 8.96), fold(8.0, 12.47), fold(0.65, 2.1)))
+    assert not sc.folds_ok(g(fold(40.0, 8.96, passed=True, consistent=False), fold(8.0, 12.47)))
+    # a fold left out of the pooled interval (its refit undetermined) does not join
+    assert not sc.folds_ok(g(fold(12.48, 8.96, passed=True, used=False), fold(8.0, 12.47)))
+    # two folds that cannot test it alone carry it together when their sum stands above the scatter
+    assert sc.folds_ok(g(fold(9.0, 7.0), fold(8.0, 8.0)))
+    assert not sc.folds_ok(g(fold(3.0, 7.0), fold(2.0, 8.0)))
+
+
 class _Fit:
     """A fitted model as the attribution reads it (no effects of its own, a zero training prediction)."""
     effects = {}

@@ -10,7 +10,8 @@ accepted when
   :data:`FOLD_MIN_NATS`; or, when only one fold can test the candidate, that fold passes with the gain
   the candidate would earn were it true; or, when several folds can test it but fewer than 2 pass,
   all of them gain as it would were it true and their summed gain is :data:`FOLDS_COMBINED_Z` standard
-  deviations above zero. A fold can test a candidate when the candidate, were it true,
+  deviations above zero; or the same holds of every fold that carries at least :data:`FOLD_JOIN_NATS` of
+  it (two or more). A fold can test a candidate when the candidate, were it true,
   would gain at least :data:`FOLD_INFO_NATS` there (its held-out blocks carry its signature: a ramp-rate
   term cannot be tested on a hold, nor a weak second effect on blocks where the first one's model error
   hides it). Nor can a fold whose refit of the candidate leaves its held-out prediction undetermined
@@ -84,6 +85,11 @@ FOLD_CONSISTENCY_REL = 0.25
 #: The testable folds' summed gain, in standard deviations ``sqrt(2 sum I)`` of its scatter, that passes a
 #: candidate that too few folds pass one by one (:meth:`Scorer.folds_ok`).
 FOLDS_COMBINED_Z = 2.0
+#: Expected held-out gain (nats), were the candidate true, from which a fold joins the combined fold test
+#: (:meth:`Scorer.folds_ok`) although too little of the candidate is in it to test it alone: a true candidate's
+#: gain there is positive with probability Phi(sqrt(I / 2)), 0.94 at 5 nats, so each such fold can still be asked to
+#: gain and to be consistent with it.
+FOLD_JOIN_NATS = 5.0
 #: Candidates (positive held-out gain, none accepted) from which pairs are fitted from scratch.
 PAIR_STARTS = 2
 #: Relative accuracy of an accepted effect's model (a floor on the scoring sigma of a second effect).
@@ -304,11 +310,13 @@ class Scorer:
         folds that can test it together.
 
         Where a single fold can test it (a ramp-rate term beside a record of holds, a weak second effect
-        that the first one's model error hides elsewhere), that fold must pass and its gain must also be
+        that the first one's model error hides elsewhere), that fold passes it if it passes and its gain is also
         what the candidate would earn were it true: a gain far above it comes from a larger misfit (slow
         noise, another effect) the candidate merely leans against. Where several folds can test it but
         fewer pass, all of them must gain, each as the candidate would were it true, and their summed
-        gain must reach :data:`FOLDS_COMBINED_Z` standard deviations of its scatter.
+        gain must reach :data:`FOLDS_COMBINED_Z` standard deviations of its scatter. Failing these, the same
+        combined test is asked of every fold carrying at least :data:`FOLD_JOIN_NATS` of the candidate
+        (pre-registration 18).
 
         Parameters
         ----------
@@ -322,17 +330,26 @@ class Scorer:
         if g["folds_passed"] >= self.folds_needed:
             return True
         testable = [f for f in g["folds"] if f.get("testable")]
-        if len(testable) == 1:
-            return bool(testable[0]["passed"] and testable[0]["consistent"])
+        if len(testable) == 1 and testable[0]["passed"] and testable[0]["consistent"]:
+            return True
         # several folds can test it, but too little of it is in each to pass them one by one (a near-limit
         # effect, each fold's held-out segment carrying 10-30 nats of it): they must agree, each gaining and each
         # consistent with the gain expected were the candidate true, and their summed gain must stand
         # FOLDS_COMBINED_Z scatters above zero (were the candidate false, the sum would centre on
-        # -sum(I), so a false one passes with probability below Phi(-FOLDS_COMBINED_Z))
-        if len(testable) < 2 or not all(f["consistent"] and f["total"] > 0 for f in testable):
+        # -sum(I), so a false one passes with probability below Phi(-FOLDS_COMBINED_Z)). The folds that test it
+        # are asked first; then, by the same test, every fold that carries at least FOLD_JOIN_NATS of it (a fold
+        # of 9 nats beside one of 12 carries the candidate as surely as two of 11)
+        joined = [f for f in g["folds"] if f.get("used", True) and f["info_if_true"] >= FOLD_JOIN_NATS]
+        return any(self._together(fs) for fs in (testable, joined))
+
+    @staticmethod
+    def _together(folds: list) -> bool:
+        """Whether ``folds`` (two or more) carry a candidate together: each gains, consistent with the gain
+        expected were the candidate true, and the summed gain stands :data:`FOLDS_COMBINED_Z` scatters above zero."""
+        if len(folds) < 2 or not all(f["consistent"] and f["total"] > 0 for f in folds):
             return False
-        total = sum(f["total"] for f in testable)
-        info = sum(f["info_if_true"] for f in testable)
+        total = sum(f["total"] for f in folds)
+        info = sum(f["info_if_true"] for f in folds)
         return bool(total >= FOLDS_COMBINED_Z * np.sqrt(2.0 * info))
 
     def delta_bic(self, pred_cand: np.ndarray, pred_base: np.ndarray, k_extra: int,
