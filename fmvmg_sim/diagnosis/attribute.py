@@ -311,8 +311,8 @@ class Scorer:
 
         Where a single fold can test it (a ramp-rate term beside a record of holds, a weak second effect
         that the first one's model error hides elsewhere), that fold carries the candidate when it passes and
-        its gain is also what the candidate would earn were it true: a gain far above it comes from a larger misfit (slow
-        noise, another effect) the candidate merely leans against. Where several folds can test it but
+        its gain is also what the candidate would earn were it true: a gain far above it comes from a larger
+        misfit (slow noise, another effect) the candidate merely leans against. Where several folds can test it but
         fewer pass, all of them must gain, each as the candidate would were it true, and their summed
         gain must reach :data:`FOLDS_COMBINED_Z` standard deviations of its scatter. Failing these, the same
         combined test is asked of every fold carrying at least :data:`FOLD_JOIN_NATS` of the candidate
