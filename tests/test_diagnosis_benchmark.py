@@ -185,3 +185,36 @@ def test_inseparable_pair_members_are_scored_apart():
     assert [r["tier_separable"] for r in sc["rows"]] == ["below", "above", "above"]
     assert sc["pair_cases_above"] == 3 and sc["pairs_exact_above"] == 1 / 3
     assert sc["pair_cases_separable"] == 2 and sc["pairs_exact_separable"] == 0.5
+
+
+def test_rates_carry_their_wilson_interval():
+    # the closed form (Wilson 1927) and a textbook value: 9 of 10 at 95 % is 0.596-0.982
+    from fmvmg_sim.diagnosis.benchmark import score, wilson_interval
+    z = 1.959963984540054
+
+    def closed(k, n):
+        p = k / n
+        c = (p + z * z / (2 * n)) / (1 + z * z / n)
+        h = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+        return [c - h, c + h]
+    assert np.allclose(wilson_interval(9, 10), [0.5958, 0.9821], atol=5e-5)
+    for k, n in ((9, 10), (0, 12), (854, 883), (14, 439)):
+        assert np.allclose(wilson_interval(k, n), closed(k, n), atol=1e-12)
+    assert wilson_interval(0, 0) is None
+    # in the scores: each rate's interval is on its own count of cases (two of three singles right, one null
+    # clean, the ambiguity-set rate over singles and pairs above the limit)
+    labs = [{"case": 0, "effects": {}, "tier": "null", "snr": 0.0}] + [
+        {"case": i, "effects": {e: {}}, "tier": "above", "snr": 50.0}
+        for i, e in enumerate(("thermal_lag", "duffing", "feedthrough"), 1)] + [
+        {"case": 4, "effects": {"duffing": {}, "feedthrough": {}}, "tier": "above", "snr": 50.0}]
+
+    def res(verdict, accepted=()):
+        return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted), "ambiguous_with": {},
+                "rows": {a: {"shrink": 0.9, "params": {}} for a in accepted}}
+    sc = score(labs, [res("none"), res("explained", ["thermal_lag"]), res("explained", ["duffing"]), res("none"),
+                      res("explained", ["duffing", "feedthrough"])])
+    assert sc["top2"] == 2 / 3 and np.allclose(sc["ci95"]["top2"], closed(2, 3))
+    assert np.allclose(sc["ci95"]["false_alarm_rate"], closed(0, 1))
+    assert sc["effect_cases_above"] == 4 and np.allclose(sc["ci95"]["truth_in_ambiguity_set"], closed(3, 4))
+    assert sc["ci95"]["pairs_exact"] == wilson_interval(1, 1)
+    json.dumps(sc["ci95"])  # plain floats, written as they are

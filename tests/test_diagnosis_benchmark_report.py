@@ -23,10 +23,11 @@ def test_summary_reads_targets_counts_and_causes():
     lines = md.splitlines()
     assert lines[0] == "# Diagnosis benchmark: 5 cases, seed 7"
     row = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in lines if ln.startswith("| ")}
-    # one false alarm of two nulls: 0.5, not met; top-1 one of two singles; the pair exact
-    assert row["false alarms (null cases)"] == ["0.500", "1 of 2", "<= 0.05", "no"]
-    assert row["top-1, single effects above the limit"] == ["0.500", "1 of 2", ">= 0.9", "no"]
-    assert row["exact pairs"] == ["1.000", "1 of 1", ">= 0.7", "yes"]
+    # one false alarm of two nulls: 0.5, not met, and its 95 % interval (0.095-0.905) lies wholly above 0.05;
+    # top-1 one of two singles: not met, but the interval reaches past 0.9, so not decided; the pair exact
+    assert row["false alarms (null cases)"] == ["0.500", "1 of 2", "0.095-0.905", "<= 0.05", "no (decided)"]
+    assert row["top-1, single effects above the limit"] == ["0.500", "1 of 2", "0.095-0.905", ">= 0.9", "no"]
+    assert row["exact pairs"] == ["1.000", "1 of 1", "0.207-1.000", ">= 0.7", "yes"]
     assert row["median held-out shrink when right"][0] == "0.900"
     # the missed feedthrough (no row: never fitted) is counted under the acceptance criteria
     crit = [v for k, v in row.items() if k.startswith("criteria")]
@@ -37,8 +38,8 @@ def test_summary_reads_targets_counts_and_causes():
 def test_summary_of_an_empty_selection_has_no_verdict():
     sc = score([{"case": 0, "effects": {}, "tier": "null", "snr": 0.0}], [_res("none")])
     md = format_scores(sc)
-    assert "| top-1, single effects above the limit | - | - | >= 0.9 | - |" in md
-    assert "| false alarms (null cases) | 0.000 | 0 of 1 | <= 0.05 | yes |" in md
+    assert "| top-1, single effects above the limit | - | - | - | >= 0.9 | - |" in md
+    assert "| false alarms (null cases) | 0.000 | 0 of 1 | 0.000-0.793 | <= 0.05 | yes |" in md
     assert "No single effect above the limit and no pair member was missed." in md
 
 

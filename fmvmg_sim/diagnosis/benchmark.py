@@ -26,7 +26,10 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
   each case row holds its own as ``miss``, and (``snr_truth_beyond_answer``, :func:`answer_snr`, computed by
   :func:`run_benchmark` for every wrong answer) how far the answer is from the truth in the record's noise;
 * ``partial_when_right``: correct attributions (``top1`` or ``pair_exact``) whose verdict is nevertheless
-  "unexplained" (the accepted set leaves a located gap open), over ``right_cases``.
+  "unexplained" (the accepted set leaves a located gap open), over ``right_cases``;
+* ``ci95``: the 95 % Wilson score interval of each rate above that is a proportion of counted cases
+  (:data:`INTERVALS`, :func:`wilson_interval`), so that a rate over a few dozen cases is read with its
+  uncertainty and a target can be seen to be met, missed, or not yet decided.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import binomtest
 
 from ..record import atomic_write_text
 
@@ -219,6 +223,33 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
     return "criteria"
 
 
+#: Rates given a 95 % interval in ``ci95``: (rate key, key of the number of cases it is a proportion of).
+INTERVALS = (("false_alarm_rate", "null_cases"), ("top1", "single_above"), ("top2", "single_above"),
+             ("pairs_exact", "pair_cases"), ("pairs_exact_above", "pair_cases_above"),
+             ("pairs_exact_separable", "pair_cases_separable"), ("truth_in_ambiguity_set", "effect_cases_above"))
+
+
+def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> list[float] | None:
+    """Wilson score interval of a binomial proportion.
+
+    Parameters
+    ----------
+    successes, n : int
+        Cases that count, out of ``n``.
+    confidence : float, optional
+        Two-sided confidence level.
+
+    Returns
+    -------
+    list of float or None
+        ``[low, high]``; None when ``n`` is 0.
+    """
+    if n <= 0:
+        return None
+    ci = binomtest(int(successes), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return [float(ci.low), float(ci.high)]
+
+
 def score(labels: list[dict], results: list[dict]) -> dict:
     """Score diagnoses against labels.
 
@@ -296,7 +327,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
     out["pairs_exact_separable"], out["pair_cases_separable"] = rate("pair_exact",
                                                                       lambda r: r["tier_separable"] == "above")
     out["pairs_at_least_one"], _ = rate("pair_one", lambda r: True)
-    out["truth_in_ambiguity_set"], _ = rate("in_set", lambda r: r["tier"] == "above")
+    out["truth_in_ambiguity_set"], out["effect_cases_above"] = rate("in_set", lambda r: r["tier"] == "above")
     # correct attributions (top-1 right, or a pair's exact set) whose verdict still calls a part unexplained
     out["partial_when_right"], out["right_cases"] = rate(
         "partial", lambda r: r.get("top1") is True or r.get("pair_exact") is True)
@@ -336,6 +367,9 @@ def score(labels: list[dict], results: list[dict]) -> dict:
                                 "top2": rate("top2", lambda r: r["tier_white"] == "above")[0],
                                 "pair_cases_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[1],
                                 "pairs_exact_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[0]}
+    # rates are means of booleans: the count is the rate times its number of cases
+    out["ci95"] = {k: (wilson_interval(round(out[k] * out[n]), out[n]) if out.get(k) is not None else None)
+                   for k, n in INTERVALS}
     out["rows"] = rows
     return out
 

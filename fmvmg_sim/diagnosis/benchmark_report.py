@@ -29,6 +29,21 @@ def _count(v, n) -> str:
     return f"{round(v * n)} of {n}"
 
 
+def _interval(ci) -> str:
+    return "-" if not ci else f"{ci[0]:.3f}-{ci[1]:.3f}"
+
+
+def _met(v, ci, op: str, target: float) -> str:
+    """Whether a target is met by the point value; "(decided)" when the 95 % interval lies on one side of it."""
+    if v is None:
+        return "-"
+    met = v <= target if op == "<=" else v >= target
+    out = "yes" if met else "no"
+    if ci and (ci[1] < target or ci[0] > target):
+        out += " (decided)"
+    return out
+
+
 def format_scores(sc: dict) -> str:
     """Markdown summary of benchmark scores.
 
@@ -47,12 +62,15 @@ def format_scores(sc: dict) -> str:
     L = [head, ""]
     if sc.get("errors"):
         L += [f"**{sc['errors']} diagnoses failed** (scored as misses; their rows hold the error).", ""]
-    L += ["| score | measured | cases | target | met |", "|---|---|---|---|---|"]
+    cis = sc.get("ci95") or {}
+    L += ["| score | measured | cases | 95 % interval | target | met |", "|---|---|---|---|---|---|"]
     for key, nkey, op, target, label in TARGETS:
         v = sc.get(key)
         n = sc.get(nkey) if nkey else None
-        met = "-" if v is None else ("yes" if (v <= target if op == "<=" else v >= target) else "no")
-        L.append(f"| {label} | {_pct(v)} | {_count(v, n) if nkey else '-'} | {op} {target:g} | {met} |")
+        L.append(f"| {label} | {_pct(v)} | {_count(v, n) if nkey else '-'} | {_interval(cis.get(key))} | "
+                 f"{op} {target:g} | {_met(v, cis.get(key), op, target)} |")
+    L += ["", "Intervals: Wilson score, 95 %, on the counted cases; \"decided\" when the whole interval lies on one "
+          "side of the target."]
     L += ["", "| other score | measured | cases |", "|---|---|---|",
           f"| exact pairs, both members above the limit | {_pct(sc.get('pairs_exact_above'))} | "
           f"{_count(sc.get('pairs_exact_above'), sc.get('pair_cases_above'))} |",
