@@ -218,3 +218,10 @@ def test_rates_carry_their_wilson_interval():
     assert sc["effect_cases_above"] == 4 and np.allclose(sc["ci95"]["truth_in_ambiguity_set"], closed(3, 4))
     assert sc["ci95"]["pairs_exact"] == wilson_interval(1, 1)
     json.dumps(sc["ci95"])  # plain floats, written as they are
+    # the singles (SNR 50) fall in the 50-100 band, with the same interval; the other bands are empty
+    bands = {(b["snr_min"], b["snr_max"]): b for b in sc["above_by_snr"]}
+    assert list(bands) == [(0.0, 20.0), (20.0, 50.0), (50.0, 100.0), (100.0, None)]
+    assert bands[(50.0, 100.0)]["single_cases"] == 3 and bands[(50.0, 100.0)]["top2"] == 2 / 3
+    assert bands[(50.0, 100.0)]["top2_ci95"] == sc["ci95"]["top2"]
+    assert bands[(20.0, 50.0)]["single_cases"] == 0 and bands[(20.0, 50.0)]["top2_ci95"] is None
+    json.dumps(sc["above_by_snr"])

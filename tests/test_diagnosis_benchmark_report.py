@@ -29,6 +29,9 @@ def test_summary_reads_targets_counts_and_causes():
     assert row["top-1, single effects above the limit"] == ["0.500", "1 of 2", "0.095-0.905", ">= 0.9", "no"]
     assert row["exact pairs"] == ["1.000", "1 of 1", "0.207-1.000", ">= 0.7", "yes"]
     assert row["median held-out shrink when right"][0] == "0.900"
+    # the two singles above the limit (SNR 50) in their SNR band, with intervals; empty bands left out
+    assert row["50-100"] == ["2", "0.500 (0.095-0.905)", "0.500 (0.095-0.905)"]
+    assert not any(k in row for k in ("< 20", "20-50", ">= 100"))
     # the missed feedthrough (no row: never fitted) is counted under the acceptance criteria
     crit = [v for k, v in row.items() if k.startswith("criteria")]
     assert crit == [["1", "0", "0"]]

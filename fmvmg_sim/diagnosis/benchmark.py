@@ -27,6 +27,9 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
   :func:`run_benchmark` for every wrong answer) how far the answer is from the truth in the record's noise;
 * ``partial_when_right``: correct attributions (``top1`` or ``pair_exact``) whose verdict is nevertheless
   "unexplained" (the accepted set leaves a located gap open), over ``right_cases``;
+* ``above_by_snr``: top-1 and top-2 of the single effects above the limit in bands of their signature SNR
+  (:data:`SNR_BANDS`; the tier is set by the SNR the amplitude was scaled to, so a few cases of the first band
+  read just under 10), each with its 95 % interval: where above the limit the misses lie;
 * ``ci95``: the 95 % Wilson score interval of each rate above that is a proportion of counted cases
   (:data:`INTERVALS`, :func:`wilson_interval`), so that a rate over a few dozen cases is read with its
   uncertainty and a target can be seen to be met, missed, or not yet decided.
@@ -229,6 +232,10 @@ INTERVALS = (("false_alarm_rate", "null_cases"), ("top1", "single_above"), ("top
              ("pairs_exact_separable", "pair_cases_separable"), ("truth_in_ambiguity_set", "effect_cases_above"))
 
 
+#: Bands of signature SNR (lower, upper) over which ``above_by_snr`` splits the single effects above the limit.
+SNR_BANDS = ((0.0, 20.0), (20.0, 50.0), (50.0, 100.0), (100.0, np.inf))
+
+
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> list[float] | None:
     """Wilson score interval of a binomial proportion.
 
@@ -367,6 +374,15 @@ def score(labels: list[dict], results: list[dict]) -> dict:
                                 "top2": rate("top2", lambda r: r["tier_white"] == "above")[0],
                                 "pair_cases_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[1],
                                 "pairs_exact_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[0]}
+    out["above_by_snr"] = []
+    for lo, hi in SNR_BANDS:
+        band = [r for r in rows if "top1" in r and r["tier"] == "above" and lo <= r["snr"] < hi]
+        k1, k2 = sum(r["top1"] for r in band), sum(r["top2"] for r in band)
+        out["above_by_snr"].append({"snr_min": lo, "snr_max": None if np.isinf(hi) else hi,
+                                    "single_cases": len(band), "top1": k1 / len(band) if band else None,
+                                    "top2": k2 / len(band) if band else None,
+                                    "top1_ci95": wilson_interval(k1, len(band)),
+                                    "top2_ci95": wilson_interval(k2, len(band))})
     # rates are means of booleans: the count is the rate times its number of cases
     out["ci95"] = {k: (wilson_interval(round(out[k] * out[n]), out[n]) if out.get(k) is not None else None)
                    for k, n in INTERVALS}

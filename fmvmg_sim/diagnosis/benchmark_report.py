@@ -94,6 +94,16 @@ def format_scores(sc: dict) -> str:
             d = tiers.get(t) or {}
             L.append(f"| {t} | {d.get('single_cases', 0)} | {_pct(d.get('top1'))} | {_pct(d.get('top2'))} | "
                      f"{d.get('pair_cases', 0)} | {_pct(d.get('pairs_exact'))} |")
+    bands = [b for b in sc.get("above_by_snr") or () if b.get("single_cases")]
+    if bands:
+        L += ["", "Single effects above the limit by signature SNR (95 % intervals):", "",
+              "| SNR | cases | top-1 | top-2 |", "|---|---|---|---|"]
+        for b in bands:
+            snr = f"{b['snr_min']:g}-{b['snr_max']:g}" if b["snr_max"] is not None else f">= {b['snr_min']:g}"
+            if b["snr_min"] == 0:
+                snr = f"< {b['snr_max']:g}"
+            L.append(f"| {snr} | {b['single_cases']} | {_pct(b['top1'])} ({_interval(b['top1_ci95'])}) | "
+                     f"{_pct(b['top2'])} ({_interval(b['top2_ci95'])}) |")
     causes = sc.get("misses_by_cause") or {}
     if causes:
         rows = {k: [causes.get(g, {}).get(k, 0) for g in ("single_above", "pairs_above", "pairs")] for k in MISS_CAUSES}
