@@ -99,9 +99,8 @@ def format_scores(sc: dict) -> str:
         L += ["", "Single effects above the limit by signature SNR (95 % intervals):", "",
               "| SNR | cases | top-1 | top-2 |", "|---|---|---|---|"]
         for b in bands:
-            snr = f"{b['snr_min']:g}-{b['snr_max']:g}" if b["snr_max"] is not None else f">= {b['snr_min']:g}"
-            if b["snr_min"] == 0:
-                snr = f"< {b['snr_max']:g}"
+            lo, hi = b["snr_min"], b["snr_max"]
+            snr = f">= {lo:g}" if hi is None else (f"< {hi:g}" if lo == 0 else f"{lo:g}-{hi:g}")
             L.append(f"| {snr} | {b['single_cases']} | {_pct(b['top1'])} ({_interval(b['top1_ci95'])}) | "
                      f"{_pct(b['top2'])} ({_interval(b['top2_ci95'])}) |")
     causes = sc.get("misses_by_cause") or {}
