@@ -480,6 +480,7 @@ def _scorer_stub(Y, S, folds):
     f = SimpleNamespace(Y=Y, S=S, S_score=S, present=np.ones(Y.shape[1], bool), converter={})
     f.residual = lambda pred, scoring=False, Y=None: Fitter.residual(f, pred, scoring, Y)
     sc = Scorer.__new__(Scorer)
+    folds = [dict(fd, scored=fd.get("scored", fd["test"])) for fd in folds]
     sc.f, sc.folds, sc.noise_params = f, folds, [(0.0, 1.0)] * Y.shape[1]
     return sc
 
@@ -543,3 +544,41 @@ def test_a_relaxation_below_its_floor_is_refused_only_when_the_data_pull_it_ther
     mf = fit(0.98, 0.0)
     del mf._ctx["cost_at"]
     assert bounds_verdict(scorer, mf)[0] is False
+
+
+def test_rate_blocks_held_out_of_a_fold_trained_on_no_rate_are_not_scored():
+    """A fold whose training window holds no applied rate cannot predict the scale factor on its held-out rate
+    steps (both refits set it from the prior): those blocks are left out of its score (90083/6: a true
+    mode-split drift lost 4789 nats per block there). A fold that trained on a rate step scores them all."""
+    from fmvmg_sim.diagnosis.attribute import scored_blocks
+
+    n = 120
+    idx = np.arange(n)
+    folds = [{"train": idx < 30 + 30 * k, "test": (idx >= 30 + 30 * k) & (idx < 60 + 30 * k)} for k in range(3)]
+    rate = np.where((idx >= 40) & (idx < 50), 50.0, 0.0)          # one rate step, inside the first fold's test
+    rate[70:75] = -20.0                                           # and one in the second fold's test
+    scored = scored_blocks(folds, rate)
+    assert np.array_equal(scored[0], folds[0]["test"] & (rate == 0.0))    # trained on no rate: steps dropped
+    assert np.array_equal(scored[1], folds[1]["test"])                    # its training holds the first step
+    assert np.array_equal(scored[2], folds[2]["test"])
+    # no rate anywhere, or none held out: every held-out block is scored (the rule acts on no other record)
+    assert all(np.array_equal(s, fd["test"]) for s, fd in zip(scored_blocks(folds, np.zeros(n)), folds))
+    late = np.where(idx >= 115, 10.0, 0.0)                        # a step only in the last fold's test
+    s_late = scored_blocks(folds, late)
+    assert np.array_equal(s_late[2], folds[2]["test"] & (idx < 115)) and np.array_equal(s_late[0], folds[0]["test"])
+    # the scorer reads only the scored blocks: a candidate right everywhere but 100 sigma off on the unscored
+    # rate blocks (its prior-set scale factor) passes; scored there, it would be sunk
+    rng = np.random.default_rng(4)
+    truth = np.where(idx >= 30, 3.0, 0.0)[:, None]
+    Y = truth + rng.standard_normal((n, 1))
+    for fd, s in zip(folds, scored):
+        fd["scored"] = s
+    sc = _scorer_stub(Y, np.ones((n, 1)), folds)
+    base = {"folds": [(np.zeros((n, 1)), {}) for _ in folds]}
+    wild = truth + np.where((rate != 0.0)[:, None] & (idx < 60)[:, None], 100.0, 0.0)
+    cand = {"folds": [(wild, {}) for _ in folds]}
+    g = sc.gain(cand, base)
+    assert g["folds_passed"] == 3 and g["ci"][0] > 3.0
+    for fd in sc.folds:
+        fd["scored"] = fd["test"]
+    assert sc.gain(cand, base)["folds"][0]["total"] < -1e4

@@ -15,7 +15,9 @@ accepted when
   would gain at least :data:`FOLD_INFO_NATS` there (its held-out blocks carry its signature: a ramp-rate
   term cannot be tested on a hold, nor a weak second effect on blocks where the first one's model error
   hides it). Nor can a fold whose refit of the candidate leaves its held-out prediction undetermined
-  (:data:`INDETERMINATE_SD`): that fold is left out of the pooled interval as well;
+  (:data:`INDETERMINATE_SD`): that fold is left out of the pooled interval as well. A fold whose training
+  window holds no applied rate scores only its held-out blocks without one (:data:`RATE_ON_DPS`): there the
+  scale factor is extrapolated from the calibration's prior by the baseline and the candidate alike;
 * Delta-BIC on the training window is below -10;
 * its parameters lie inside their physical bounds and are not pinned at one: a linear parameter at a non-zero
   bound is pinned when the training data pull it past the bound (:func:`bounds_verdict`), a time constant or
@@ -103,6 +105,13 @@ SECOND_EFFECT_REL_FLOOR = 0.01
 INDETERMINATE_SD = 10.0
 #: Temperature span (K) a fold's training window needs to be scored.
 MIN_TRAIN_SPAN_K = 5.0
+#: Applied rate (deg/s, block mean) from which a block is a rate-table block. A fold whose training window holds
+#: none scores only its held-out blocks without one: with no applied rate to train on, the scale factor (sense
+#: gain, Coriolis offset, the sense mode's Q and split) is set by the calibration's prior, and a rate step held
+#: out scores how far each model's refit happens to slide it, hundreds of noise sigmas either way (90083/6: a
+#: mode-split drift of SNR 64 lost 4789 nats per block on the 51 rate blocks of such a fold, the nominal model
+#: itself 229 sigma rms off there) rather than the candidate's temperature law (pre-registration 19).
+RATE_ON_DPS = 1e-6
 DETERMINISTIC = tuple(e for e in MODELS if e in DEVICE_EFFECTS or e in PATH_EFFECTS)
 #: Effects that change the output only through a change of temperature: on a record held at one temperature each
 #: is at most a constant offset (tested on the forward model), which the nominal knobs absorb unless it exceeds the
@@ -149,6 +158,28 @@ def separating_experiment(a: str, b: str) -> str:
     return SEPARATING.get(frozenset({a, b}), DEFAULT_EXPERIMENT)
 
 
+def scored_blocks(folds: list, rate_dps: np.ndarray) -> list:
+    """The held-out blocks each fold scores: all of them, but the rate-table blocks of a fold trained on none.
+
+    With no applied rate in its training window a fold's refits set the scale factor from the calibration's
+    prior, so a held-out rate step scores how far each refit happens to slide it rather than the candidate
+    (:data:`RATE_ON_DPS`).
+
+    Parameters
+    ----------
+    folds : list of dict
+        ``train`` and ``test`` boolean block masks (:meth:`~.data.Prepared.folds`).
+    rate_dps : ndarray
+        Applied rate per block (deg/s).
+
+    Returns
+    -------
+    list of ndarray of bool
+    """
+    rate_on = np.abs(np.nan_to_num(np.asarray(rate_dps, dtype=float))) > RATE_ON_DPS
+    return [fd["test"] & ~rate_on if not rate_on[fd["train"]].any() else fd["test"].copy() for fd in folds]
+
+
 class Scorer:
     """Forward-chained held-out scoring of model fits against a baseline.
 
@@ -178,8 +209,16 @@ class Scorer:
         span = [float(np.nanmax(T[fd["train"]]) - np.nanmin(T[fd["train"]])) if fd["train"].any() else 0.0
                 for fd in folds]
         keep = [k for k, sp in enumerate(span) if sp >= MIN_TRAIN_SPAN_K]
+        # the blocks each fold scores: without an applied rate in its training window, not the rate-table blocks
+        folds = [dict(fd, scored=sc) for fd, sc in zip(folds, scored_blocks(folds, fitter.rate_b))]
+        #: per fold (all of them, in order): held-out rate-table blocks left unscored
+        self.unscored_rate_blocks = [int((fd["test"] & ~fd["scored"]).sum()) for fd in folds]
+        keep = [k for k in keep if folds[k]["scored"].any()]
         self.folds = [folds[k] for k in keep] if keep else folds
         self.dropped_folds = [k for k in range(len(folds)) if k not in keep] if keep else []
+        for fd in self.folds:  # no fold left with scored blocks: each scores its whole held-out segment
+            if not fd["scored"].any():
+                fd["scored"] = fd["test"].copy()
         self.folds_needed = min(FOLDS_NEEDED, len(self.folds))
         # the nominal model on each fold
         self.nominal = self.fold_predictions(self._nominal_refit)
@@ -214,8 +253,8 @@ class Scorer:
             det, sd = None, None
             if unc:
                 lin, cov = unc[0]
-                sd = lin.predict_sd(cov, fd["test"])
-                ratio = sd / self.f.S_score[fd["test"]]
+                sd = lin.predict_sd(cov, fd["scored"])
+                ratio = sd / self.f.S_score[fd["scored"]]
                 ratio[:, ~self.f.present] = 0.0
                 det = bool(np.all(np.nanpercentile(ratio, 90, axis=0) <= INDETERMINATE_SD)) if len(ratio) else True
             out.append((pred, eff, det, sd))
@@ -256,22 +295,23 @@ class Scorer:
         allv, folds, by_ch = [], [], []
         for k, fd in enumerate(self.folds):
             par = self.channel_noise(base["folds"][k][0], fd["train"])
-            Zb, Zc = (self.f.residual(pred, scoring=True)[fd["test"]] for pred in (base["folds"][k][0],
+            rows = fd["scored"]
+            Zb, Zc = (self.f.residual(pred, scoring=True)[rows] for pred in (base["folds"][k][0],
                                                                                  cand["folds"][k][0]))
             if self.f.converter:
                 # channels read through a coarse converter: each prediction through its staircase
                 par = [None if c in self.f.converter else p for c, p in enumerate(par)]
-                mb, mc = (self.f.converter_moments(p[0], fd["test"], p[3] if len(p) > 3 else None)
+                mb, mc = (self.f.converter_moments(p[0], rows, p[3] if len(p) > 3 else None)
                           for p in (base["folds"][k], cand["folds"][k]))
-                dch = ((nll_by_channel(Zb, par) + self.f.converter_nll(mb, fd["test"]))
-                       - (nll_by_channel(Zc, par) + self.f.converter_nll(mc, fd["test"])))
+                dch = ((nll_by_channel(Zb, par) + self.f.converter_nll(mb, rows))
+                       - (nll_by_channel(Zc, par) + self.f.converter_nll(mc, rows)))
                 # were the candidate true, its expected block means would be read (a plug-in estimate of the
                 # divergence: it can fall below zero where the baseline's moments are the wider, hence the clip)
                 Yc = np.full(Zc.shape, np.nan)
                 for c, (m, _) in mc.items():
-                    Yc[:, c] = np.where(np.isfinite(self.f.Y[fd["test"], c]), m, np.nan)
-                info_conv = float(np.sum(self.f.converter_nll(mb, fd["test"], Y=Yc)
-                                         - self.f.converter_nll(mc, fd["test"], Y=Yc)))
+                    Yc[:, c] = np.where(np.isfinite(self.f.Y[rows, c]), m, np.nan)
+                info_conv = float(np.sum(self.f.converter_nll(mb, rows, Y=Yc)
+                                         - self.f.converter_nll(mc, rows, Y=Yc)))
             else:
                 dch = nll_by_channel(Zb, par) - nll_by_channel(Zc, par)
                 info_conv = 0.0

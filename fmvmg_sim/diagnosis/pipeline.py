@@ -580,8 +580,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
                    "heldout_outside_training_temperatures": {k: cover[k] for k in (
                        "heldout_outside_fraction", "heldout_outside_max_K", "margin_K")},
                    "folds": [{"test_start_s": f["test_start_s"], "test_end_s": f["test_end_s"],
-                              "train_blocks": int(f["train"].sum()), "test_blocks": int(f["test"].sum()), **c}
-                             for f, c in zip(folds, cover["folds"])]},
+                              "train_blocks": int(f["train"].sum()), "test_blocks": int(f["test"].sum()),
+                              "rate_blocks_unscored": n_rate, **c}
+                             for f, c, n_rate in zip(folds, cover["folds"], scorer.unscored_rate_blocks)]},
         "settings": {"null_runs": n_null, "seed": seed, "block_s": float(np.median(np.diff(prep.block_time_s()))),
                      "delta_bic_max": -10.0, "alpha_holm": loc.ALPHA,
                      "folds_not_scored": scorer.dropped_folds, "min_train_span_K": MIN_TRAIN_SPAN_K,

@@ -201,6 +201,9 @@ def _coverage_lines(r: dict, settings: dict, design: dict | None = None) -> list
     L = ["| fold | trained on | tested on | held-out blocks outside the training range |", "|---|---|---|---|"]
     for k, f in enumerate(folds):
         note = f" (not scored: its training window spans under {span_K:g} K)" if k in not_scored else ""
+        if f.get("rate_blocks_unscored") and k not in not_scored:
+            note += (f" ({f['rate_blocks_unscored']} rate-table blocks not scored: no applied rate in its training "
+                     "window, so the scale factor there is the prior's)")
         L.append(f"| {k + 1} | {f['train_blocks']} blocks, {rng(f['train_C'])} | {f['test_blocks']} blocks, "
                  f"{rng(f['test_C'])} | {100 * f['test_outside_fraction']:.0f} %{note} |")
     o = r.get("heldout_outside_training_temperatures") or {}
