@@ -40,6 +40,19 @@ def test_record_section_names_what_a_one_temperature_record_cannot_identify():
     assert "Not identifiable" not in text and "No fold's training window" not in text
 
 
+def test_a_fold_left_unscored_says_why():
+    from fmvmg_sim.diagnosis.report import _coverage_lines
+    fold = {"train_C": [20.0, 60.0], "test_C": [60.0, 40.0], "train_blocks": 389, "test_blocks": 216,
+            "test_outside_fraction": 0.0, "test_start_s": 4320.0}
+    folds = [dict(fold, rate_blocks_unscored=216), dict(fold, train_C=[30.0, 32.0], rate_blocks_unscored=0),
+             dict(fold, rate_blocks_unscored=51)]
+    rows = [ln for ln in _coverage_lines({"folds": folds}, {"folds_not_scored": [0, 1], "min_train_span_K": 5.0})
+            if ln.startswith("| ") and ln[2].isdigit()]
+    assert "every held-out block is a rate-table step" in rows[0] and "spans under" not in rows[0]
+    assert "its training window spans under 5 K" in rows[1]
+    assert "(not scored:" not in rows[2] and "51 rate-table blocks not scored" in rows[2]
+
+
 def test_undetermined_folds_are_named_beside_the_fold_counts():
     from fmvmg_sim.diagnosis.report import _undetermined
     assert _undetermined({"folds_undetermined": 1}) == " (1 undetermined)"

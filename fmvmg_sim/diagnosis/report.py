@@ -200,7 +200,13 @@ def _coverage_lines(r: dict, settings: dict, design: dict | None = None) -> list
     rng = lambda v: f"{v[0]:.1f} to {v[1]:.1f} C" if v else "-"  # noqa: E731
     L = ["| fold | trained on | tested on | held-out blocks outside the training range |", "|---|---|---|---|"]
     for k, f in enumerate(folds):
-        note = f" (not scored: its training window spans under {span_K:g} K)" if k in not_scored else ""
+        if k not in not_scored:
+            note = ""
+        elif f.get("rate_blocks_unscored") and f["rate_blocks_unscored"] >= f["test_blocks"]:
+            note = (" (not scored: every held-out block is a rate-table step and its training window holds no "
+                    "applied rate)")
+        else:
+            note = f" (not scored: its training window spans under {span_K:g} K)"
         if f.get("rate_blocks_unscored") and k not in not_scored:
             note += (f" ({f['rate_blocks_unscored']} rate-table blocks not scored: no applied rate in its training "
                      "window, so the scale factor there is the prior's)")
