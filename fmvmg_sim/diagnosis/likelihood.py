@@ -253,7 +253,13 @@ def block_length(d: np.ndarray) -> int:
 
 
 def block_bootstrap_ci(d: np.ndarray, n_boot: int = 300, level: float = 0.95, seed: int = 0) -> tuple[float, float]:
-    """Moving-block bootstrap confidence interval of the mean of a serially correlated series.
+    """Circular block bootstrap confidence interval of the mean of a serially correlated series.
+
+    Blocks of :func:`block_length` start anywhere and wrap from the end to the start (Politis and Romano's
+    circular block bootstrap), so every value is drawn with the same probability and the resampled means
+    centre on the sample mean. A moving-block bootstrap, whose blocks must fit inside the series, draws the first
+    and last ``L - 1`` values less often; with blocks up to a third of the series long (a gain series that
+    follows slow noise), its interval then centres on the middle of the record and can exclude the mean itself.
 
     Parameters
     ----------
@@ -274,8 +280,8 @@ def block_bootstrap_ci(d: np.ndarray, n_boot: int = 300, level: float = 0.95, se
     L = block_length(d)
     nb = int(np.ceil(n / L))
     rng = np.random.default_rng(seed)
-    starts = rng.integers(0, n - L + 1, size=(n_boot, nb))
-    idx = (starts[:, :, None] + np.arange(L)).reshape(n_boot, -1)[:, :n]
+    starts = rng.integers(0, n, size=(n_boot, nb))
+    idx = ((starts[:, :, None] + np.arange(L)) % n).reshape(n_boot, -1)[:, :n]
     means = d[idx].mean(axis=1)
     a = (1 - level) / 2
     return float(np.quantile(means, a)), float(np.quantile(means, 1 - a))
