@@ -221,7 +221,7 @@ def fit_params(Z: np.ndarray) -> list:
 
 
 def block_length(d: np.ndarray) -> int:
-    """Moving-block length for a bootstrap of the mean of ``d``, from its own autocorrelation.
+    """Block length for a bootstrap of the mean of ``d``, from its own autocorrelation.
 
     Twice the first lag where the sample autocorrelation falls inside its +-2/sqrt(n) band (the
     flat-top lag-window rule of Politis and White), at least ``2 n^(1/3)`` and at most ``n/3``. A

@@ -200,16 +200,17 @@ def _coverage_lines(r: dict, settings: dict, design: dict | None = None) -> list
     rng = lambda v: f"{v[0]:.1f} to {v[1]:.1f} C" if v else "-"  # noqa: E731
     L = ["| fold | trained on | tested on | held-out blocks outside the training range |", "|---|---|---|---|"]
     for k, f in enumerate(folds):
-        if k not in not_scored:
-            note = ""
-        elif f.get("rate_blocks_unscored") and f["rate_blocks_unscored"] >= f["test_blocks"]:
+        n_rate = f.get("rate_blocks_unscored") or 0
+        if k in not_scored and n_rate >= f["test_blocks"]:
             note = (" (not scored: every held-out block is a rate-table step and its training window holds no "
                     "applied rate)")
-        else:
+        elif k in not_scored:
             note = f" (not scored: its training window spans under {span_K:g} K)"
-        if f.get("rate_blocks_unscored") and k not in not_scored:
-            note += (f" ({f['rate_blocks_unscored']} rate-table blocks not scored: no applied rate in its training "
-                     "window, so the scale factor there is the prior's)")
+        elif n_rate:
+            note = (f" ({n_rate} rate-table blocks not scored: no applied rate in its training window, so the scale "
+                    "factor there is the prior's)")
+        else:
+            note = ""
         L.append(f"| {k + 1} | {f['train_blocks']} blocks, {rng(f['train_C'])} | {f['test_blocks']} blocks, "
                  f"{rng(f['test_C'])} | {100 * f['test_outside_fraction']:.0f} %{note} |")
     o = r.get("heldout_outside_training_temperatures") or {}
