@@ -25,6 +25,11 @@ def test_tiny_benchmark(tmp_path, capsys):
     for lab in (json.loads(p.read_text()) for p in (out / "labels").glob("*.json")):
         for n, snr in lab["snr_by_effect"].items():
             assert abs(np.log(snr / lab["snr_target"])) < np.log(1.3), (n, snr, lab["snr_target"])
+        # the training window's share of the signature: never (beyond the calibrations' difference) above the
+        # whole record's, and tiered like it
+        if lab["effects"] and not lab.get("out_of_library"):
+            assert 0.0 <= lab["snr_train"] <= 1.05 * max(lab["snr"], max(lab["snr_by_effect"].values()))
+            assert lab["tier_train"] in ("below", "near", "above")
 
 
 def test_bad_case_mix_is_exit_2_naming_the_option(tmp_path, capsys):
@@ -225,3 +230,39 @@ def test_rates_carry_their_wilson_interval():
     assert bands[(50.0, 100.0)]["top2_ci95"] == sc["ci95"]["top2"]
     assert bands[(20.0, 50.0)]["single_cases"] == 0 and bands[(20.0, 50.0)]["top2_ci95"] is None
     json.dumps(sc["above_by_snr"])
+
+
+def test_single_effects_are_split_by_what_the_training_window_carries():
+    # a single effect above the whole-record limit whose training window carries it below the limit is missed
+    # for that reason (after the held-out fold test, before the look-alike and criteria causes); top-1 and
+    # top-2 are split by the label's training tier beside the target's, old labels without it not counted
+    from fmvmg_sim.diagnosis.benchmark import score
+
+    def res(verdict, accepted=(), rows=None):
+        rw = {a: {"shrink": 0.9, "params": {}, "accepted": True, "folds_testable": 3, "why_not": []} for a in accepted}
+        rw.update(rows or {})
+        return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted) + list(rows or {}),
+                "ambiguous_with": {}, "rows": rw}
+
+    def lab(case, effect, snr_train):
+        d = {"case": case, "effects": {effect: {}}, "tier": "above", "snr": 30.0, "snr_by_effect": {effect: 30.0}}
+        if snr_train is not None:
+            d.update(snr_train=snr_train, tier_train="above" if snr_train >= 10 else "near")
+        return d
+    nope = {"folds_testable": 3, "why_not": ["dBIC not below -10"], "accepted": False}
+    labs = [lab(0, "temperature_rate", 5.1), lab(1, "duffing", 17.6), lab(2, "feedthrough", 40.0),
+            lab(3, "q_factor_drift", 8.0), lab(4, "duffing", None),
+            lab(5, "thermal_hysteresis", 2.0)]
+    results = [res("unexplained", rows={"temperature_rate": nope}), res("none", rows={"duffing": nope}),
+               res("explained", ["feedthrough"]), res("explained", ["q_factor_drift"]),
+               res("none", rows={"duffing": nope}),
+               res("none", rows={"thermal_hysteresis": dict(nope, folds_testable=0)})]
+    sc = score(labs, results)
+    assert [r.get("miss") for r in sc["rows"]] == [
+        {"temperature_rate": "train_below_limit"}, {"duffing": "criteria"}, None, None, {"duffing": "criteria"},
+        {"thermal_hysteresis": "no_heldout_test"}]
+    tw = sc["training_window_tiers"]
+    assert tw["train_above"]["single_cases"] == 2 and tw["train_above"]["top2"] == 0.5
+    assert tw["train_below"]["single_cases"] == 3 and abs(tw["train_below"]["top1"] - 1 / 3) < 1e-12
+    assert tw["train_above"]["top2_ci95"][0] < 0.5 < tw["train_above"]["top2_ci95"][1]
+    assert sc["single_above"] == 6 and sc["misses_by_cause"]["single_above"]["train_below_limit"] == 1

@@ -57,3 +57,20 @@ def test_summary_shows_the_separable_pairs_beside_the_target():
            if ln.startswith("| ")}
     assert row["exact pairs"][:2] == ["0.500", "1 of 2"]
     assert row["exact pairs, both members above the limit beside the other (separable)"] == ["1.000", "1 of 1"]
+
+
+def test_summary_splits_single_effects_by_the_training_window():
+    labs = [{"case": 0, "effects": {"temperature_rate": {}}, "tier": "above", "snr": 28.0, "tier_train": "near",
+             "snr_train": 5.0},
+            {"case": 1, "effects": {"duffing": {}}, "tier": "above", "snr": 40.0, "tier_train": "above",
+             "snr_train": 39.0}]
+    sc = score(labs, [_res("unexplained"), _res("explained", ["duffing"])])
+    md = format_scores(sc)
+    row = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in md.splitlines()
+           if ln.startswith("| ")}
+    assert row["above the limit there too"] == ["1", "1.000 (0.207-1.000)", "1.000 (0.207-1.000)"]
+    assert row["below the limit there"] == ["1", "0.000 (0.000-0.793)", "0.000 (0.000-0.793)"]
+    # labels without a training tier (runs before it existed) leave the table out
+    old = score([{k: v for k, v in lb.items() if k not in ("tier_train", "snr_train")} for lb in labs],
+                [_res("unexplained"), _res("explained", ["duffing"])])
+    assert "above the limit there too" not in format_scores(old)

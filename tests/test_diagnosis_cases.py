@@ -202,6 +202,40 @@ def test_separable_snr_is_what_the_partner_cannot_explain(tmp_path):
     assert separable_snr(rec, dev, THETA, single, noise, {"temperature_rate": 60.0}) == {"temperature_rate": 60.0}
 
 
+def test_training_snr_is_what_the_training_window_carries(tmp_path):
+    # a temperature-rate term acts only while the oven ramps: with the record's one ramp in its held-out end
+    # (the last fold's test segment starts at 80 % of the record, its training ends at 76 %), the diagnoser's
+    # training window carries none of it, however high the whole-record SNR; with the ramps early, most of it
+    from fmvmg_sim.diagnosis.cases import noise_model, signature_snr, training_snr
+    from fmvmg_sim.scenario import load_scenario
+    late = """
+[temperature]
+start_C = 25.0
+segments = [
+  { hold_s = 8500.0 },
+  { ramp_to_C = 45.0, rate_C_per_min = 2.0 },
+  { hold_s = 1400.0 },
+]
+"""
+    dev = load_scenario(NOMINAL).device_nominal
+    eff = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}}
+    for name, profile in (("late", late), ("early", None)):
+        kw = {"profile": profile} if profile else {}
+        rec, _ = oven_record(tmp_path, name, seed=21, theta=THETA, **kw)
+        noise = noise_model(read_record(rec), dev, THETA)
+        whole = signature_snr(rec, NOMINAL, dev, THETA, eff, noise=noise)
+        train = training_snr(rec, dev, THETA, eff, noise)
+        assert whole > 30, (name, whole)
+        if name == "late":
+            assert train < 0.05 * whole, (whole, train)
+        else:
+            assert 0.5 * whole < train < 1.05 * whole, (whole, train)
+    # no effect, no signature; a noise level keeps its analytic SNR (its band is read on the whole record)
+    assert training_snr(rec, dev, THETA, {}, noise) == 0.0
+    q = {"quantization": {"lsb_V": 0.005}}
+    assert training_snr(rec, dev, THETA, q, noise) == signature_snr(rec, NOMINAL, dev, THETA, q, noise=noise) > 10
+
+
 def test_scaled_cases_stay_clear_of_physical_bounds():
     # a case's amplitude scaled past its bound is clipped inside it, where the diagnosis's
     # "not pinned at a bound" rule can accept a right answer; time constants are left alone

@@ -30,6 +30,10 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
 * ``above_by_snr``: top-1 and top-2 of the single effects above the limit in bands of their signature SNR
   (:data:`SNR_BANDS`; the tier is set by the SNR the amplitude was scaled to, so a few cases of the first band
   read just under 10), each with its 95 % interval: where above the limit the misses lie;
+* ``training_window_tiers``: top-1 and top-2 of the single effects above the limit whose signature is above it
+  on the diagnoser's training window as well (label ``tier_train``, :func:`.cases.training_snr`), beside them
+  those below it there: a diagnostic of where the misses lie, beside the target's definition, not in its place
+  (labels without ``tier_train`` are not counted in it);
 * ``ci95``: the 95 % Wilson score interval of each rate above that is a proportion of counted cases
   (:data:`INTERVALS`, :func:`wilson_interval`), so that a rate over a few dozen cases is read with its
   uncertainty and a target can be seen to be met, missed, or not yet decided.
@@ -171,6 +175,9 @@ MISS_CAUSES = {
                          "truth's SNR beyond the answer, cases.snr_beyond): the record cannot prefer the truth",
     "no_heldout_test": "no held-out fold can test the effect as fitted (its prediction moves no fold by the nats a "
                        "test needs: the signature is absent from the training window or from the held-out blocks)",
+    "train_below_limit": "the training window carries the signature below the detection limit (after the nominal "
+                         "calibration there: cases.training_snr): forward-chained attribution fits on that window, "
+                         "so the record holds the effect mostly in its held-out end",
     "look_alike": "a look-alike explains the same gap (the truth is in the ambiguity set or named as the look-alike)",
     "beside_stronger": "the other member of the pair is at least 100 times stronger and was found",
     "criteria": "fitted and testable, but short of an acceptance criterion (held-out interval, folds, BIC, bounds)",
@@ -180,7 +187,7 @@ MISS_CAUSES = {
 
 def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: dict, snr_by: dict,
                not_identifiable: list | tuple = (), snr_separable: dict | None = None,
-               snr_beyond_answer: float | None = None) -> str:
+               snr_beyond_answer: float | None = None, snr_train: float | None = None) -> str:
     """Why a true effect is missing from (or not first in) the accepted set: a key of :data:`MISS_CAUSES`.
 
     Parameters
@@ -200,6 +207,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
         The label's SNR by effect beyond the pair's other member (:func:`.cases.separable_snr`).
     snr_beyond_answer : float, optional
         The true signature's SNR beyond the accepted effects (:func:`answer_snr`).
+    snr_train : float, optional
+        A single effect's SNR on the diagnoser's training window (the label's ``snr_train``).
 
     Returns
     -------
@@ -218,6 +227,8 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
     row = rows.get(effect) or {}
     if row.get("folds_testable") == 0:
         return "no_heldout_test"
+    if len(truth) == 1 and snr_train is not None and snr_train < SEPARABLE_SNR_MIN:
+        return "train_below_limit"
     if effect in ambiguous or any("look-alike" in w for w in row.get("why_not") or []):
         return "look_alike"
     other = [t for t in truth if t != effect]
@@ -278,7 +289,8 @@ def score(labels: list[dict], results: list[dict]) -> dict:
         amb = set() if err else {x for v in res["ambiguous_with"].values() for x in v}
         claimed = (not err) and (res["verdict"] != "none" or bool(acc))
         r = {"case": lab["case"], "truth": truth, "tier": lab["tier"], "tier_white": lab.get("tier_white", lab["tier"]),
-             "tier_separable": lab.get("tier_separable", lab["tier"]), "snr": lab["snr"], "error": res.get("error"),
+             "tier_separable": lab.get("tier_separable", lab["tier"]), "tier_train": lab.get("tier_train"),
+             "snr": lab["snr"], "snr_train": lab.get("snr_train"), "error": res.get("error"),
              "verdict": None if err else res["verdict"], "accepted": acc}
         # "unexplained" beside accepted effects: they explain part of the gap, not where it lies
         partial = bool(not err and acc and res["verdict"] == "unexplained")
@@ -307,7 +319,8 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             if missed and not err:
                 r["miss"] = {t: miss_cause(t, truth, acc, amb, res.get("rows") or {}, lab.get("snr_by_effect") or {},
                                          (res.get("design") or {}).get("not_identifiable") or (),
-                                         lab.get("snr_separable_by_effect"), res.get("snr_truth_beyond_answer"))
+                                         lab.get("snr_separable_by_effect"), res.get("snr_truth_beyond_answer"),
+                                         lab.get("snr_train"))
                              for t in truth if not (len(truth) == 2 and t in acc)}
         right = [t for t in truth if t in acc]
         if right and not err:
@@ -374,6 +387,16 @@ def score(labels: list[dict], results: list[dict]) -> dict:
                                 "top2": rate("top2", lambda r: r["tier_white"] == "above")[0],
                                 "pair_cases_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[1],
                                 "pairs_exact_above": rate("pair_exact", lambda r: r["tier_white"] == "above")[0]}
+    # single effects above the limit, split by whether the training window carries them above it too
+    out["training_window_tiers"] = {}
+    for name, sel in (("train_above", lambda r: r["tier_train"] == "above"),
+                      ("train_below", lambda r: r["tier_train"] in ("below", "near"))):
+        k1, n = rate("top1", lambda r: r["tier"] == "above" and sel(r))
+        k2, _ = rate("top2", lambda r: r["tier"] == "above" and sel(r))
+        out["training_window_tiers"][name] = {
+            "single_cases": n, "top1": k1, "top2": k2,
+            "top1_ci95": wilson_interval(round(k1 * n), n) if n else None,
+            "top2_ci95": wilson_interval(round(k2 * n), n) if n else None}
     out["above_by_snr"] = []
     for lo, hi in SNR_BANDS:
         band = [r for r in rows if "top1" in r and r["tier"] == "above" and lo <= r["snr"] < hi]

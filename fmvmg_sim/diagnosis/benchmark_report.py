@@ -103,6 +103,16 @@ def format_scores(sc: dict) -> str:
             snr = f">= {lo:g}" if hi is None else (f"< {hi:g}" if lo == 0 else f"{lo:g}-{hi:g}")
             L.append(f"| {snr} | {b['single_cases']} | {_pct(b['top1'])} ({_interval(b['top1_ci95'])}) | "
                      f"{_pct(b['top2'])} ({_interval(b['top2_ci95'])}) |")
+    tw = sc.get("training_window_tiers") or {}
+    if any((tw.get(k) or {}).get("single_cases") for k in ("train_above", "train_below")):
+        L += ["", "Single effects above the limit by what the diagnoser's training window carries of them (a "
+              "diagnostic beside the target, whose limit is the whole record's; 95 % intervals):", "",
+              "| training window | cases | top-1 | top-2 |", "|---|---|---|---|"]
+        for k, label in (("train_above", "above the limit there too"), ("train_below", "below the limit there")):
+            d = tw.get(k) or {}
+            if d.get("single_cases"):
+                L.append(f"| {label} | {d['single_cases']} | {_pct(d['top1'])} ({_interval(d['top1_ci95'])}) | "
+                         f"{_pct(d['top2'])} ({_interval(d['top2_ci95'])}) |")
     causes = sc.get("misses_by_cause") or {}
     if causes:
         rows = {k: [causes.get(g, {}).get(k, 0) for g in ("single_above", "pairs_above", "pairs")] for k in MISS_CAUSES}

@@ -350,9 +350,13 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     sep = separable_snr(path, s.device_nominal, theta, eff, noise, snr_by) if effects else {}
     label["snr_separable_by_effect"] = sep
     label["tier_separable"] = tier(min(sep.values())) if effects else "null"
+    # ... and as detectable as its training window carries it (a secondary tier: the issue's limit is the
+    # whole record's)
+    label["snr_train"] = training_snr(path, s.device_nominal, theta, eff, noise) if effects else 0.0
+    label["tier_train"] = tier(label["snr_train"]) if effects else "null"
     if ool is not None:
         label.update(out_of_library=ool, snr_target=target, snr=ool["snr"], tier=tier(ool["snr"]),
-                     tier_white=tier(ool["snr"]), tier_separable=tier(ool["snr"]))
+                     tier_white=tier(ool["snr"]), tier_separable=tier(ool["snr"]), snr_train=None, tier_train=None)
     atomic_write_text(out / "labels" / f"case_{k:04d}.json", json.dumps(label, indent=1) + "\n")
     return label
 
@@ -550,10 +554,11 @@ def noise_model(record, device_nominal, theta: dict) -> list:
     return out
 
 
-def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict) -> tuple:
+def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict, training: bool = False) -> tuple:
     """``(fit, cal)``: a :class:`~.fitting.Fitter` on the record's profile whose observations are the noise-free
     quasi-static truth of the device ``theta`` with the deterministic effects ``det`` (absent channels stay
-    absent), and the nominal knobs calibrated to it on every block."""
+    absent), and the nominal knobs calibrated to it on every block (``training``: on the diagnoser's training
+    window, the last forward-chained fold's training blocks)."""
     from ..averaged import scale_factor_V_per_dps
     from ..diagram import build_diagram
     from ..record import read_record
@@ -567,14 +572,17 @@ def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict) -> tu
     truth = fit.table(theta, det, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
     truth[:, ~fit.present] = np.nan
     fit.Y = truth
-    return fit, calibrate(fit, np.ones(fit.prep.n_blocks, bool))
+    rows = fit.prep.folds()[-1]["train"] if training else np.ones(fit.prep.n_blocks, bool)
+    return fit, calibrate(fit, rows)
 
 
-def _whitened_norm(fit, pred: np.ndarray, noise: list) -> float:
-    """``sqrt(chi^2)`` of the truth's residual against ``pred``, each channel whitened by its noise model."""
+def _whitened_norm(fit, pred: np.ndarray, noise: list, rows: np.ndarray | None = None) -> float:
+    """``sqrt(chi^2)`` of the truth's residual against ``pred``, each channel whitened by its noise model
+    (the whole record filtered, the blocks ``rows`` summed; default all)."""
     from .likelihood import innovations
     R = fit.residual(pred)
-    chi2 = sum(float(np.nansum((innovations(R[:, c], p[0], p[1]) / p[2]) ** 2))
+    rows = np.ones(R.shape[0], bool) if rows is None else rows
+    chi2 = sum(float(np.nansum((innovations(R[:, c], p[0], p[1])[rows] / p[2]) ** 2))
                for c, p in enumerate(noise) if p is not None and np.isfinite(R[:, c]).any())
     return float(np.sqrt(chi2))
 
@@ -626,6 +634,41 @@ def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effec
     if noise is None:
         return float(max(np.sqrt(cal.solution.cost), snr_noise))
     return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise), snr_noise))
+
+
+def training_snr(record_path, device_nominal, theta: dict, effects: dict, noise: list) -> float:
+    """SNR of the effects' signature on the diagnoser's training window, after the nominal calibration there.
+
+    As :func:`signature_snr`, but the nominal knobs are calibrated on the last forward-chained fold's training
+    blocks (the window on which the diagnosis calibrates, fits each candidate and computes its Delta-BIC) and
+    the chi-square is summed over those blocks. An effect whose signature lies in the held-out end of the
+    record (a temperature-rate term whose only fast ramp comes last) has a high whole-record SNR and a low
+    training one: forward-chained attribution cannot fit what its training window does not carry.
+
+    Parameters
+    ----------
+    record_path : path-like
+    device_nominal : Device
+    theta, effects : dict
+        The case's nominal deviations and (scaled) effects.
+    noise : list
+        Per-channel ``(rho, K, s)`` from :func:`noise_model`.
+
+    Returns
+    -------
+    float
+        The noise-level effects' analytic SNR (:func:`signature_snr`) when that is larger: their band is read
+        on the whole record; 0 without effects.
+    """
+    if not effects:
+        return 0.0
+    snr_noise = _noise_level_snr(effects, device_nominal)
+    det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
+    if not det:
+        return snr_noise
+    fit, cal = _calibrated_truth(record_path, device_nominal, theta, det, training=True)
+    train = fit.prep.folds()[-1]["train"]
+    return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise, train), snr_noise))
 
 
 def _snr_beyond(fit, cal, names: list, noise: list) -> float:
