@@ -266,3 +266,11 @@ def test_single_effects_are_split_by_what_the_training_window_carries():
     assert tw["train_below"]["single_cases"] == 3 and abs(tw["train_below"]["top1"] - 1 / 3) < 1e-12
     assert tw["train_above"]["top2_ci95"][0] < 0.5 < tw["train_above"]["top2_ci95"][1]
     assert sc["single_above"] == 6 and sc["misses_by_cause"]["single_above"]["train_below_limit"] == 1
+
+
+def test_help_states_the_case_mix_in_plain_percent(capsys):
+    import pytest
+    with pytest.raises(SystemExit) as ex:
+        main(["diagnose-benchmark", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert ex.value.code == 0 and "~20 % null, ~55 % one effect, ~25 % two effects" in out and "%%" not in out

@@ -15,8 +15,8 @@ def register(sub) -> None:
     sub : argparse._SubParsersAction
     """
     p = sub.add_parser("diagnose-benchmark", help="score the diagnosis on labelled simulated cases", description=(
-        "Generate labelled cases (nominal parameters perturbed within tolerance; ~20 %% null, ~55 %% one effect, "
-        "~25 %% two effects; SNR from below to above the detection limit; random temperature profiles), keep the "
+        "Generate labelled cases (nominal parameters perturbed within tolerance; ~20 % null, ~55 % one effect, "
+        "~25 % two effects; SNR from below to above the detection limit; random temperature profiles), keep the "
         "labels in a separate folder, diagnose every case on Dask (a LocalCluster unless --scheduler) and score."))
     p.add_argument("--cases", type=int, default=20, help="number of cases (default 20)")
     p.add_argument("--seed", type=int, default=0, help="case seed")
