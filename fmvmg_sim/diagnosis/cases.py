@@ -624,16 +624,7 @@ def signature_snr(record_path, scenario_path, device_nominal, theta: dict, effec
     -------
     float
     """
-    if not effects:
-        return 0.0
-    snr_noise = _noise_level_snr(effects, device_nominal)
-    det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
-    if not det:
-        return snr_noise
-    fit, cal = _calibrated_truth(record_path, device_nominal, theta, det)
-    if noise is None:
-        return float(max(np.sqrt(cal.solution.cost), snr_noise))
-    return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise), snr_noise))
+    return _snr(record_path, device_nominal, theta, effects, noise)
 
 
 def training_snr(record_path, device_nominal, theta: dict, effects: dict, noise: list) -> float:
@@ -660,15 +651,23 @@ def training_snr(record_path, device_nominal, theta: dict, effects: dict, noise:
         The noise-level effects' analytic SNR (:func:`signature_snr`) when that is larger: their band is read
         on the whole record; 0 without effects.
     """
+    return _snr(record_path, device_nominal, theta, effects, noise, training=True)
+
+
+def _snr(record_path, device_nominal, theta: dict, effects: dict, noise: list | None,
+         training: bool = False) -> float:
+    """:func:`signature_snr` (every block) or :func:`training_snr` (``training``: the training window)."""
     if not effects:
         return 0.0
     snr_noise = _noise_level_snr(effects, device_nominal)
     det = {n: v for n, v in effects.items() if n not in NOISE_LEVEL}
     if not det:
         return snr_noise
-    fit, cal = _calibrated_truth(record_path, device_nominal, theta, det, training=True)
-    train = fit.prep.folds()[-1]["train"]
-    return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise, train), snr_noise))
+    fit, cal = _calibrated_truth(record_path, device_nominal, theta, det, training=training)
+    if noise is None:
+        return float(max(np.sqrt(cal.solution.cost), snr_noise))
+    rows = fit.prep.folds()[-1]["train"] if training else None
+    return float(max(_whitened_norm(fit, cal.lin.predict(cal.solution.x), noise, rows), snr_noise))
 
 
 def _snr_beyond(fit, cal, names: list, noise: list) -> float:
