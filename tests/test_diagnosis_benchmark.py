@@ -21,6 +21,10 @@ def test_tiny_benchmark(tmp_path, capsys):
     assert not list((out / "cases").glob("*.json"))
     # the readable summary beside the scores
     assert "| false alarms (null cases) |" in (out / "scores.md").read_text()
+    # every diagnosed case carries the record-design note, and the scores count it by what the case was
+    rows = [r for r in json.loads((out / "scores.json").read_text())["rows"] if r["error"] is None]
+    assert rows and all(isinstance(r["note_after_training"], bool) for r in rows)
+    assert set(sc["after_training_note"]) == {"null", "miss_train_below", "miss_train_above", "hit"}
     # effect amplitudes are scaled to the drawn signature SNR (within 25 %, unless clipped at a bound)
     for lab in (json.loads(p.read_text()) for p in (out / "labels").glob("*.json")):
         for n, snr in lab["snr_by_effect"].items():

@@ -74,3 +74,29 @@ def test_summary_splits_single_effects_by_the_training_window():
     old = score([{k: v for k, v in lb.items() if k not in ("tier_train", "snr_train")} for lb in labs],
                 [_res("unexplained"), _res("explained", ["duffing"])])
     assert "above the limit there too" not in format_scores(old)
+
+
+def test_summary_counts_where_the_record_design_note_fired():
+    # the note should fire where the truth's evidence lies after the training window (a miss whose training
+    # window carries it below the limit) and stay silent where the truth was found or nothing acts
+    def res(verdict, accepted=(), fires=False):
+        return dict(_res(verdict, accepted), design={"not_identifiable": [], "gap_after_training": {"fires": fires}})
+    labs = [{"case": 0, "effects": {}, "tier": "null", "snr": 0.0},
+            {"case": 1, "effects": {"temperature_rate": {}}, "tier": "above", "snr": 28.0, "tier_train": "near",
+             "snr_train": 5.0},
+            {"case": 2, "effects": {"duffing": {}}, "tier": "above", "snr": 40.0, "tier_train": "above",
+             "snr_train": 39.0},
+            {"case": 3, "effects": {"feedthrough": {}}, "tier": "above", "snr": 30.0, "tier_train": "above",
+             "snr_train": 29.0}]
+    sc = score(labs, [res("none"), res("unexplained", fires=True), res("explained", ["duffing"]), res("none")])
+    assert sc["after_training_note"] == {"null": {"fired": 0, "cases": 1},
+                                         "miss_train_below": {"fired": 1, "cases": 1},
+                                         "miss_train_above": {"fired": 0, "cases": 1},
+                                         "hit": {"fired": 0, "cases": 1}}
+    md = format_scores(sc)
+    row = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in md.splitlines()
+           if ln.startswith("| ")}
+    assert row["top-2 misses above the limit, training window below it"] == ["1 of 1"]
+    assert row["null cases"] == ["0 of 1"]
+    # results from before the note (no "gap_after_training") leave the table out
+    assert "| null cases |" not in format_scores(score(labs, [_res("none")] * 4))

@@ -113,6 +113,8 @@ def test_null_replicates_carry_the_calibration_error(tmp_path):
     assert rep["verdict"] == "none", rep["remainder"]
     z = rep["localization"]["regimes"]["heating"]["z"]
     assert z < 2.0, z
+    # nor does the record-design note read the extrapolation after the training window as a gap there
+    assert not rep["design"]["gap_after_training"]["fires"], rep["design"]["gap_after_training"]["tests"]
 
 
 def _oven_prep():

@@ -268,6 +268,35 @@ def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> list[fl
     return [float(ci.low), float(ci.high)]
 
 
+def after_training_note_rates(rows: list[dict]) -> dict:
+    """How often the record-design note (:func:`.windows.after_training_note`) fired, by what the case was.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Case rows of :func:`score` (those without ``note_after_training`` are not counted).
+
+    Returns
+    -------
+    dict
+        ``{group: {"fired": k, "cases": n}}`` for null cases, and for single effects above the detection limit:
+        top-2 misses whose training window carries the effect below the limit (``miss_train_below``, where the
+        note should fire), top-2 misses above it there (``miss_train_above``) and top-2 hits (``hit``, where
+        it should stay silent, the truth having closed the gap).
+    """
+    groups = {"null": lambda r: r["truth"] == [] and "false_alarm" in r,
+              "miss_train_below": lambda r: r.get("top2") is False and r["tier"] == "above"
+              and r["tier_train"] in ("below", "near"),
+              "miss_train_above": lambda r: r.get("top2") is False and r["tier"] == "above"
+              and r["tier_train"] == "above",
+              "hit": lambda r: r.get("top2") is True and r["tier"] == "above"}
+    out = {}
+    for name, sel in groups.items():
+        v = [r["note_after_training"] for r in rows if "note_after_training" in r and sel(r)]
+        out[name] = {"fired": int(sum(v)), "cases": len(v)}
+    return out
+
+
 def score(labels: list[dict], results: list[dict]) -> dict:
     """Score diagnoses against labels.
 
@@ -313,6 +342,9 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             r["in_set"] = bool(set(truth) <= (set(acc) | amb))
         if res.get("snr_truth_beyond_answer") is not None:
             r["snr_truth_beyond_answer"] = res["snr_truth_beyond_answer"]
+        note = ((res.get("design") or {}).get("gap_after_training") or {}) if not err else {}
+        if "fires" in note:
+            r["note_after_training"] = bool(note["fires"])
         if truth and not lab.get("out_of_library"):
             r["partial"] = partial
             missed = (len(truth) == 1 and not r["top1"]) or (len(truth) == 2 and not r["pair_exact"])
@@ -397,6 +429,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             "single_cases": n, "top1": k1, "top2": k2,
             "top1_ci95": wilson_interval(round(k1 * n), n) if n else None,
             "top2_ci95": wilson_interval(round(k2 * n), n) if n else None}
+    out["after_training_note"] = after_training_note_rates(rows)
     out["above_by_snr"] = []
     for lo, hi in SNR_BANDS:
         band = [r for r in rows if "top1" in r and r["tier"] == "above" and lo <= r["snr"] < hi]

@@ -113,6 +113,16 @@ def format_scores(sc: dict) -> str:
             if d.get("single_cases"):
                 L.append(f"| {label} | {d['single_cases']} | {_pct(d['top1'])} ({_interval(d['top1_ci95'])}) | "
                          f"{_pct(d['top2'])} ({_interval(d['top2_ci95'])}) |")
+    note = sc.get("after_training_note") or {}
+    if any((note.get(k) or {}).get("cases") for k in note):
+        L += ["", "How often the report's record-design note (a gap after the last training window only) fired:", "",
+              "| cases | fired |", "|---|---|"]
+        for k, label in (("miss_train_below", "top-2 misses above the limit, training window below it"),
+                         ("miss_train_above", "top-2 misses above the limit, training window above it"),
+                         ("hit", "top-2 hits above the limit"), ("null", "null cases")):
+            d = note.get(k) or {}
+            if d.get("cases"):
+                L.append(f"| {label} | {d['fired']} of {d['cases']} |")
     causes = sc.get("misses_by_cause") or {}
     if causes:
         rows = {k: [causes.get(g, {}).get(k, 0) for g in ("single_above", "pairs_above", "pairs")] for k in MISS_CAUSES}

@@ -29,6 +29,7 @@ from .forward import CHANNELS, IRATE
 from .likelihood import slow_state_fit
 from .noise_effects import (FLICKER_Z_HELDOUT, FLICKER_Z_TRAIN, WANDER_RISE_OVER_FLAT, WANDER_Z_RISE, band_excess,
                             band_shape, flicker_level, quantization_candidate)
+from .windows import after_training_note, window_masks, window_stats
 
 #: Null re-simulations (each a full envelope run on the record's inputs).
 N_NULL = 6
@@ -364,7 +365,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     # the flicker band is read without the slow deterministic signatures a temperature profile can leave
     # (else an unmodelled gradient term reads as extra flicker), in the record and in the null alike
     slow = loc.slow_templates(prep)
-    st_null, null_ms, null_ho_allan, null_tr_allan, null_Z = [], [], [], [], []
+    st_null, null_ms, null_ho_allan, null_tr_allan, null_Z, null_win = [], [], [], [], [], []
+    win = window_masks(prep, train)
     for th, nr, pred_k in zip(thetas, nulls, null_preds):
         Yn = np.column_stack([prep.block_mean(nr[c]) for c in CHANNELS])
         Yn[fitter.transient_b, IRATE] = np.nan  # as in the measured blocks
@@ -375,8 +377,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         # offset on the training window too, so its residual there was wider than any record's (rate regimes
         # at z -4 to -8 with no gap)
         pred_n = cal.lin.predict(fitter.solve(cal.lin, train, Y=Yn).x)
-        st_null.append(loc.residual_stats(prep, fitter.residual(pred_n, Y=Yn),
-                                          _rate_residual(prep, pred_n, nr["rate_V"])))
+        Z_n = fitter.residual(pred_n, Y=Yn)
+        st_null.append(loc.residual_stats(prep, Z_n, _rate_residual(prep, pred_n, nr["rate_V"])))
+        null_win.append(window_stats(prep, Z_n, win))
         # noise alone (against the replicate's own device): the scoring noise model, the metrics' noise
         # level and the flicker band
         rr = _rate_residual(prep, pred_k, nr["rate_V"])
@@ -560,6 +563,10 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
             r["why_not"] = ["passes alone; another effect explains the gap better"]
     cover = prep.temperature_coverage()
     design = design_check(cover)
+    # where what the final model leaves lies against the training window (advice on the record's design)
+    design["gap_after_training"] = after_training_note(
+        window_stats(prep, fitter.residual(final_pred_tr), win), null_win,
+        float(prep.block_time_s()[train].max()) - float(prep.t_s[0]) if train.any() else 0.0)
     for r in ranked:
         if not r["accepted"] and r["effect"] in design["not_identifiable"]:
             r["why_not"] = ["not identifiable here: no training window leaves one temperature"] + r["why_not"]

@@ -97,6 +97,8 @@ def markdown(rep: dict) -> str:
     """
     L = [f"# Sim-to-real gap diagnosis: {rep['record']['path']}", "",
          f"**Verdict: {rep['verdict']}**" + (f" - accepted: {', '.join(rep['accepted'])}" if rep["accepted"] else ""), ""]
+    if ((rep.get("design") or {}).get("gap_after_training") or {}).get("fires"):
+        L += ["A gap lies after the last training window only: see **Record design** under Record.", ""]
     if rep.get("located_gap"):
         L += [f"{rep['located_gap']} names a gap the localisation found (section 2) and no effect passed for: it "
               "passes every held-out criterion but the fold count (its pooled held-out gain is above zero, but too few "
@@ -192,7 +194,9 @@ def markdown(rep: dict) -> str:
 
 def _coverage_lines(r: dict, settings: dict, design: dict | None = None) -> list[str]:
     """The folds' training and held-out temperatures, where the held-out data extrapolate, and what a record
-    held at one temperature cannot identify (``design``, :func:`~.pipeline.design_check`)."""
+    held at one temperature cannot identify (``design``, :func:`~.pipeline.design_check`), and whether what the
+    model leaves lies after the last training window only (``design["gap_after_training"]``,
+    :func:`~.windows.after_training_note`)."""
     folds = r.get("folds") or []
     if not folds or "train_C" not in folds[0]:
         return []
@@ -227,6 +231,12 @@ def _coverage_lines(r: dict, settings: dict, design: dict | None = None) -> list
                   "through a temperature change: held at one temperature it is at most a constant offset, which the "
                   "nominal calibration absorbs unless it exceeds the unit's tolerances. A stress relaxation, extra "
                   "flicker and a coarser converter can still be identified."]
+    after = (design or {}).get("gap_after_training") or {}
+    if after.get("fires"):
+        worst = max((t for k, t in after["tests"].items() if k.endswith("@after") and t["significant"]),
+                    key=lambda t: t["z"])
+        L += ["", f"**Record design:** {after['advice']} (mean square {worst['value'] / worst['null_mean']:.1f} "
+              f"times the null's there, z {worst['z']:.1f})."]
     return L + [""]
 
 
