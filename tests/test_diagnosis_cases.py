@@ -8,7 +8,7 @@ import pytest
 from fmvmg_sim.cli.main import main
 from fmvmg_sim.diagnosis.pipeline import diagnose
 from fmvmg_sim.record import read_record, write_record
-from tests.test_diagnosis_helpers import NOMINAL, oven_record
+from tests.test_diagnosis_helpers import LATE_RAMP, NOMINAL, oven_record
 
 THETA = {"q_sense_rel": 0.1, "quadrature_rel": -0.08, "demod_phase_mrad": 1.0, "f_modes_rel": 0.002,
          "q_drive_rel": -0.1}
@@ -208,15 +208,7 @@ def test_training_snr_is_what_the_training_window_carries(tmp_path):
     # training window carries none of it, however high the whole-record SNR; with the ramps early, most of it
     from fmvmg_sim.diagnosis.cases import noise_model, signature_snr, training_snr
     from fmvmg_sim.scenario import load_scenario
-    late = """
-[temperature]
-start_C = 25.0
-segments = [
-  { hold_s = 8500.0 },
-  { ramp_to_C = 45.0, rate_C_per_min = 2.0 },
-  { hold_s = 1400.0 },
-]
-"""
+    late = LATE_RAMP
     dev = load_scenario(NOMINAL).device_nominal
     eff = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}}
     for name, profile in (("late", late), ("early", None)):

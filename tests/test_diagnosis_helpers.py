@@ -24,6 +24,17 @@ segments = [
 ]
 """
 
+#: ~2.9 h: a long hold, then the record's one ramp after the last fold's training window (76 % of the record).
+LATE_RAMP = """
+[temperature]
+start_C = 25.0
+segments = [
+  { hold_s = 8500.0 },
+  { ramp_to_C = 45.0, rate_C_per_min = 2.0 },
+  { hold_s = 1400.0 },
+]
+"""
+
 
 def oven_record(tmp: Path, name: str, effects: dict | None = None, seed: int = 1, rate_Hz: float = 1.0,
                 noise: bool = True, theta: dict | None = None, profile: str = OVEN, duration_s: float = 10500.0):

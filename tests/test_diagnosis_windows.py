@@ -70,16 +70,8 @@ def test_a_record_whose_only_ramp_comes_after_the_training_window(tmp_path):
     from fmvmg_sim.diagnosis.pipeline import diagnose
     from fmvmg_sim.diagnosis.report import markdown
     from tests.test_diagnosis_cases import THETA
-    from tests.test_diagnosis_helpers import NOMINAL, oven_record
-    late = """
-[temperature]
-start_C = 25.0
-segments = [
-  { hold_s = 8500.0 },
-  { ramp_to_C = 45.0, rate_C_per_min = 2.0 },
-  { hold_s = 1400.0 },
-]
-"""
+    from tests.test_diagnosis_helpers import LATE_RAMP, NOMINAL, oven_record
+    late = LATE_RAMP
     rec, _ = oven_record(tmp_path, "late", {"temperature_rate": {"g_dph_per_K_per_min": 600.0}}, seed=21,
                          theta=THETA, profile=late)
     rep = diagnose(rec, NOMINAL, n_null=4, progress=False, log=lambda m: None)
