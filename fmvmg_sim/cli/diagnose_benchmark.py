@@ -37,6 +37,10 @@ def register(sub) -> None:
     p.add_argument("--ool-fraction", type=float, default=0.0, metavar="F",
                    help="fraction of out-of-library cases (a bias wander or step no library effect makes; the "
                         "right verdict is 'unexplained'); default 0, the issue's mix")
+    p.add_argument("--cases-from", default=None, metavar="DIR",
+                   help="diagnose again the stored cases (and labels) of an earlier run's output folder with "
+                        "the current code, instead of generating cases (the generation options are then unused); "
+                        "when DIR holds its scores, the outcomes are compared case by case")
     p.add_argument("--json", action="store_true", help="print the scores as one JSON object on stdout")
     p.set_defaults(func=main)
 
@@ -69,8 +73,18 @@ def main(args) -> int:
         flag = {"effects": "--effects", "kind": "--mix", "snr": "--snr-min/--snr-max",
                 "ool": "--ool-fraction"}[exc.field]
         raise InputError(str(exc), flag) from None
+    cases_from = None
+    if args.cases_from is not None:
+        from ..diagnosis.benchmark import stored_cases
+        cases_from = Path(args.cases_from)
+        if cases_from.resolve() == Path(args.out).resolve():
+            raise InputError("must differ from -o (the earlier run's reports and scores are kept)", "--cases-from")
+        try:
+            stored_cases(cases_from)
+        except ValueError as exc:
+            raise InputError(str(exc), "--cases-from") from None
     sc = run_benchmark(args.cases, args.seed, Path(args.out), scn, args.scheduler, args.duration_h * 3600.0,
-                       args.rate_hz, args.null_runs, args.workers, progress=True, mix=mix)
+                       args.rate_hz, args.null_runs, args.workers, progress=True, mix=mix, cases_from=cases_from)
     slim = {k: v for k, v in sc.items() if k != "rows"}
     if args.json:
         sys.stdout.write(json.dumps(slim, default=float) + "\n")

@@ -448,7 +448,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
 
 def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: str | None = None,
                   duration_s: float = 3 * 3600.0, rate_Hz: float = 1.0, n_null: int = 4,
-                  n_workers: int = 2, progress: bool = True, mix=None) -> dict:
+                  n_workers: int = 2, progress: bool = True, mix=None, cases_from: Path | None = None) -> dict:
     """Generate, diagnose (on Dask) and score ``n_cases`` cases.
 
     Parameters
@@ -467,6 +467,11 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
     progress : bool, optional
     mix : CaseMix, optional
         What the cases are drawn from (default: the issue's mix).
+    cases_from : Path, optional
+        An earlier run's folder: its stored cases and labels are diagnosed again with the current code
+        (nothing is generated; ``n_cases``, ``seed``, ``duration_s``, ``rate_Hz`` and ``mix`` are not used),
+        and, when it holds its scores, the outcomes are compared case by case (:func:`.paired.paired_changes`,
+        ``paired`` in the scores).
 
     Returns
     -------
@@ -482,13 +487,17 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
     else:
         cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
+    label_dir = (cases_from or out) / "labels"
     try:
-        futs = client.map(_make, range(n_cases), seed=seed, out=str(out), scenario=str(scenario),
-                          duration_s=duration_s, rate_Hz=rate_Hz, mix=mix, pure=False)
-        recs = []
-        for f in tqdm(as_completed(futs), total=n_cases, disable=not progress, file=sys.stderr, desc="cases"):
-            recs.append(f.result()["record"])  # the label itself stays on disk until scoring
-        recs = sorted(recs)
+        if cases_from is None:
+            futs = client.map(_make, range(n_cases), seed=seed, out=str(out), scenario=str(scenario),
+                              duration_s=duration_s, rate_Hz=rate_Hz, mix=mix, pure=False)
+            recs = []
+            for f in tqdm(as_completed(futs), total=n_cases, disable=not progress, file=sys.stderr, desc="cases"):
+                recs.append(f.result()["record"])  # the label itself stays on disk until scoring
+            recs = sorted(recs)
+        else:
+            recs = stored_cases(cases_from)
         dfuts = [client.submit(_diagnose_case, r, str(scenario), n_null, str(out / "reports" / Path(r).stem),
                                pure=False) for r in recs]
         for _ in tqdm(as_completed(dfuts), total=len(dfuts), disable=not progress, file=sys.stderr, desc="diagnoses"):
@@ -498,16 +507,54 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
         client.close()
         if cluster is not None:
             cluster.close()
-    labels = [json.loads((out / "labels" / f"{Path(r).stem}.json").read_text()) for r in recs]
+    labels = [json.loads((label_dir / f"{Path(r).stem}.json").read_text()) for r in recs]
     # how far each wrong answer is from the truth in the record's own noise (read after every diagnosis)
     missed = [k for k, (lab, res) in enumerate(zip(labels, results)) if wrong_answer(lab, res)]
     for k in tqdm(missed, disable=not progress, file=sys.stderr, desc="misses"):
         results[k]["snr_truth_beyond_answer"] = answer_snr(labels[k], results[k], str(scenario))
     sc = score(labels, results)
     from .cases import CaseMix
-    sc.update(seed=seed, case_duration_s=duration_s, case_rate_Hz=rate_Hz, null_runs=n_null,
-              mix=(mix or CaseMix()).as_dict())
+    if cases_from is None:
+        sc.update(seed=seed, case_duration_s=duration_s, case_rate_Hz=rate_Hz, null_runs=n_null,
+                  mix=(mix or CaseMix()).as_dict())
+    else:
+        sc.update(cases_from=str(cases_from), null_runs=n_null)
+        before = cases_from / "scores.json"
+        if before.is_file():
+            from .paired import paired_changes
+            sc["paired"] = paired_changes(json.loads(before.read_text())["rows"], sc["rows"])
     from .benchmark_report import format_scores
+    md = format_scores(sc)
+    if "paired" in sc:
+        from .paired import format_paired
+        md += "\n" + format_paired(sc["paired"], str(cases_from))
     atomic_write_text(out / "scores.json", json.dumps(sc, indent=1, default=float) + "\n")
-    atomic_write_text(out / "scores.md", format_scores(sc))
+    atomic_write_text(out / "scores.md", md)
     return sc
+
+
+def stored_cases(folder: Path) -> list[str]:
+    """The records of an earlier benchmark run, each with its label.
+
+    Parameters
+    ----------
+    folder : Path
+        The run's output folder (``cases/case_*.csv`` and ``labels/case_*.json``).
+
+    Returns
+    -------
+    list of str
+        Record paths, sorted.
+
+    Raises
+    ------
+    ValueError
+        No stored case, or a case without its label (the message names it).
+    """
+    recs = sorted(str(p) for p in (folder / "cases").glob("case_*.csv"))
+    if not recs:
+        raise ValueError(f"no stored case (cases/case_*.csv) in {folder}")
+    for r in recs:
+        if not (folder / "labels" / f"{Path(r).stem}.json").is_file():
+            raise ValueError(f"{r} has no label ({folder / 'labels' / (Path(r).stem + '.json')})")
+    return recs

@@ -59,6 +59,8 @@ def format_scores(sc: dict) -> str:
     head = f"# Diagnosis benchmark: {sc['cases']} cases"
     if "seed" in sc:
         head += f", seed {sc['seed']}"
+    if "cases_from" in sc:
+        head += f", stored in {sc['cases_from']}"
     L = [head, ""]
     if sc.get("errors"):
         L += [f"**{sc['errors']} diagnoses failed** (scored as misses; their rows hold the error).", ""]

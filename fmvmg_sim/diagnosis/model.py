@@ -117,6 +117,28 @@ class ModelFit:
         return self._ctx["refit"](rows)
 
 
+def held_lin(lin: Lin, held: dict) -> Lin:
+    """``lin`` with the knobs in ``held`` fixed at the given values (both bounds there).
+
+    Parameters
+    ----------
+    lin : Lin
+    held : dict
+        ``{knob: value}``.
+
+    Returns
+    -------
+    Lin
+    """
+    if not held:
+        return lin
+    lo, hi, x0 = lin.lo.copy(), lin.hi.copy(), lin.x0.copy()
+    for i, nm in enumerate(lin.names):
+        if nm in held:
+            lo[i] = hi[i] = x0[i] = held[nm]
+    return Lin(lin.y0, lin.cols, lin.names, x0, lin.prior_sd, lo, hi)
+
+
 class EffectModel:
     """Builds and solves the linearised model of ``names`` (effects) on top of a calibration.
 
@@ -128,11 +150,20 @@ class EffectModel:
         Effects to fit (device and path effects).
     fixed : dict, optional
         ``{effect: {nonlinear param: value}}`` held fixed (e.g. the first effect of a pair).
+    hold_unidentified : bool, optional
+        Hold the nominal knobs the calibration flags as not identifiable at their calibrated values
+        (default). The record does not determine them, so an effect's amplitude must not trade against
+        them: with no applied rate the sense gain is free within its prior, and a temperature-rate term
+        beside it could take any size within the gain's tolerance (and be refused as pinned at its bound).
+        False leaves every knob free (the label side's question of what the record could explain at all).
     """
 
-    def __init__(self, fitter: Fitter, cal: Calibration, names: list, fixed: dict | None = None):
+    def __init__(self, fitter: Fitter, cal: Calibration, names: list, fixed: dict | None = None,
+                 hold_unidentified: bool = True):
         self.f = fitter
         self.cal = cal
+        self.held = ({k: float(cal.theta[k]) for k, ok in cal.identifiable.items() if not ok}
+                     if hold_unidentified else {})
         self.names = list(names)
         self.fixed = fixed or {}
         self.values = {n: _start(n) for n in self.names}
@@ -183,7 +214,7 @@ class EffectModel:
         if "thermal_lag" in self.names:
             lag = {"thermal_lag": {"tau_s": nl.get("thermal_lag", self.values["thermal_lag"]["tau_s"]), "offset_K": 0.0}}
         path = self.f.path(lag)
-        lin = self.f.nominal_lin(self.theta, self.base, path, self.cal_jac())
+        lin = held_lin(self.f.nominal_lin(self.theta, self.base, path, self.cal_jac()), self.held)
         die, rate = path["die_b"], path["rate_b"]
         cols, names, x0, lo, hi = [], [], [], [], []
         for (n, p), tab in self.dev_jac:
