@@ -34,6 +34,20 @@ def test_tiny_benchmark(tmp_path, capsys):
         if lab["effects"] and not lab.get("out_of_library"):
             assert 0.0 <= lab["snr_train"] <= 1.05 * max(lab["snr"], max(lab["snr_by_effect"].values()))
             assert lab["tier_train"] in ("below", "near", "above")
+    # the same stored cases diagnosed again (--cases-from): nothing is generated, the labels are read where they
+    # lie, and the diagnosis being deterministic for a record, the case-by-case comparison finds no change
+    again = tmp_path / "again"
+    rc = main(["diagnose-benchmark", "--cases-from", str(out), "-o", str(again), "--null-runs", "2", "--json"])
+    assert rc == 0
+    sc2 = json.loads(capsys.readouterr().out)
+    assert not (again / "cases").exists() and not (again / "labels").exists()
+    assert sc2["cases"] == 2 and sc2["cases_from"] == str(out)
+    assert all(v["gained"] == v["lost"] == [] and v["right_before"] == v["right_after"] for v in sc2["paired"].values())
+    assert sum(v["cases"] for v in sc2["paired"].values()) >= 1
+    first = {r["case"]: r for r in json.loads((out / "scores.json").read_text())["rows"]}
+    for r in json.loads((again / "scores.json").read_text())["rows"]:
+        assert (r["verdict"], r["accepted"]) == (first[r["case"]]["verdict"], first[r["case"]]["accepted"])
+    assert "Against the earlier run on the same cases" in (again / "scores.md").read_text()
 
 
 def test_bad_case_mix_is_exit_2_naming_the_option(tmp_path, capsys):
@@ -47,6 +61,22 @@ def test_bad_case_mix_is_exit_2_naming_the_option(tmp_path, capsys):
         err = capsys.readouterr().err
         assert rc == 2 and flag in err and text in err, (argv, rc, err)
         assert not out.exists()                  # nothing half-written
+
+
+def test_cases_from_a_folder_without_cases_or_onto_itself_is_exit_2(tmp_path, capsys):
+    empty = tmp_path / "empty"
+    (empty / "cases").mkdir(parents=True)
+    rc = main(["diagnose-benchmark", "--cases-from", str(empty), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--cases-from" in err and "no stored case" in err
+    (empty / "cases" / "case_0000.csv").write_text("t_s\n0\n")
+    rc = main(["diagnose-benchmark", "--cases-from", str(empty), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "has no label" in err and "case_0000.json" in err
+    rc = main(["diagnose-benchmark", "--cases-from", str(empty), "-o", str(empty)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "must differ from -o" in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_a_narrow_mix_reaches_the_cases_and_the_scores(tmp_path, capsys):
