@@ -159,10 +159,10 @@ def test_attribution_holds_the_knobs_the_calibration_cannot_identify(tmp_path):
     cal = calibrate(f, rows)
     flagged = [k for k, ok in cal.identifiable.items() if not ok]
     assert "sense_gain_rel" in flagged
-    mf = EffectModel(f, cal, ["temperature_rate"]).fit(rows)
+    mf = EffectModel(f, cal, ["temperature_rate"], hold_unidentified=True).fit(rows)
     assert all(abs(mf.theta[k] - cal.theta[k]) < 1e-9 * KNOBS_BY_NAME[k].tolerance for k in flagged)
     assert any(abs(mf.theta[k] - cal.theta[k]) > 1e-6 for k in cal.theta if k not in flagged)
     g = mf.effects["temperature_rate"]["g_dph_per_K_per_min"]
     assert abs(g * (1.0 + mf.theta["sense_gain_rel"]) / (g_true * (1.0 + gain_true)) - 1.0) < 0.02
-    free = EffectModel(f, cal, ["temperature_rate"], hold_unidentified=False).fit(rows)
+    free = EffectModel(f, cal, ["temperature_rate"]).fit(rows)                # the default: every knob free
     assert abs(free.theta["sense_gain_rel"] - cal.theta["sense_gain_rel"]) > 1e-3   # free, the flagged gain moves

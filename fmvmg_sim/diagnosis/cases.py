@@ -675,7 +675,7 @@ def _snr_beyond(fit, cal, names: list, noise: list) -> float:
     from .model import EffectModel
     if not names:
         return _whitened_norm(fit, cal.lin.predict(cal.solution.x), noise)
-    mf = EffectModel(fit, cal, sorted(names), hold_unidentified=False).fit(np.ones(fit.prep.n_blocks, bool))
+    mf = EffectModel(fit, cal, sorted(names)).fit(np.ones(fit.prep.n_blocks, bool))
     return _whitened_norm(fit, mf._ctx["pred"], noise)
 
 

@@ -151,15 +151,16 @@ class EffectModel:
     fixed : dict, optional
         ``{effect: {nonlinear param: value}}`` held fixed (e.g. the first effect of a pair).
     hold_unidentified : bool, optional
-        Hold the nominal knobs the calibration flags as not identifiable at their calibrated values
-        (default). The record does not determine them, so an effect's amplitude must not trade against
-        them: with no applied rate the sense gain is free within its prior, and a temperature-rate term
-        beside it could take any size within the gain's tolerance (and be refused as pinned at its bound).
-        False leaves every knob free (the label side's question of what the record could explain at all).
+        Hold the nominal knobs the calibration flags as not identifiable at their calibrated values. The
+        record does not determine them, so an effect's amplitude can trade against them: with no applied rate
+        the sense gain is free within its prior, and a temperature-rate term beside it can take any size
+        within the gain's tolerance (and be refused as pinned at its bound). Default False: every knob free,
+        whose slack also absorbs model error (the attribution retries only a fit refused at a bound with
+        them held: :func:`.attribute.evaluate`).
     """
 
     def __init__(self, fitter: Fitter, cal: Calibration, names: list, fixed: dict | None = None,
-                 hold_unidentified: bool = True):
+                 hold_unidentified: bool = False):
         self.f = fitter
         self.cal = cal
         self.held = ({k: float(cal.theta[k]) for k, ok in cal.identifiable.items() if not ok}
