@@ -76,6 +76,20 @@ def test_cases_from_a_folder_without_cases_or_onto_itself_is_exit_2(tmp_path, ca
     rc = main(["diagnose-benchmark", "--cases-from", str(empty), "-o", str(empty)])
     err = capsys.readouterr().err
     assert rc == 2 and "must differ from -o" in err
+    (empty / "labels").mkdir()
+    (empty / "labels" / "case_0000.json").write_text("{not json")
+    rc = main(["diagnose-benchmark", "--cases-from", str(empty), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "case_0000.json: not JSON" in err
+    (empty / "labels" / "case_0000.json").write_text('{"case": 0}')
+    rc = main(["diagnose-benchmark", "--cases-from", str(empty), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "not a benchmark label (missing effects, tier, snr)" in err
+    (empty / "labels" / "case_0000.json").write_text('{"case": 0, "effects": {}, "tier": "null", "snr": 0.0}')
+    (empty / "scores.json").write_text('{"cases": 1}')
+    rc = main(["diagnose-benchmark", "--cases-from", str(empty), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "scores.json: not the scores of a benchmark run (no per-case rows)" in err
     assert not (tmp_path / "o").exists()
 
 

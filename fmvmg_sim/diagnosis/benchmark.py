@@ -549,12 +549,29 @@ def stored_cases(folder: Path) -> list[str]:
     Raises
     ------
     ValueError
-        No stored case, or a case without its label (the message names it).
+        No stored case, a case without its label, a label or ``scores.json`` that is not one (the message
+        names the file).
     """
     recs = sorted(str(p) for p in (folder / "cases").glob("case_*.csv"))
     if not recs:
         raise ValueError(f"no stored case (cases/case_*.csv) in {folder}")
     for r in recs:
-        if not (folder / "labels" / f"{Path(r).stem}.json").is_file():
-            raise ValueError(f"{r} has no label ({folder / 'labels' / (Path(r).stem + '.json')})")
+        lab = folder / "labels" / f"{Path(r).stem}.json"
+        if not lab.is_file():
+            raise ValueError(f"{r} has no label ({lab})")
+        try:
+            keys = json.loads(lab.read_text())
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{lab}: not JSON ({exc})") from None
+        missing = [k for k in ("case", "effects", "tier", "snr") if not isinstance(keys, dict) or k not in keys]
+        if missing:
+            raise ValueError(f"{lab}: not a benchmark label (missing {', '.join(missing)})")
+    scores = folder / "scores.json"
+    if scores.is_file():
+        try:
+            rows = json.loads(scores.read_text()).get("rows")
+        except (ValueError, UnicodeDecodeError, AttributeError) as exc:
+            raise ValueError(f"{scores}: not the scores of a benchmark run ({exc})") from None
+        if not isinstance(rows, list):
+            raise ValueError(f"{scores}: not the scores of a benchmark run (no per-case rows)")
     return recs
