@@ -582,3 +582,44 @@ def test_rate_blocks_held_out_of_a_fold_trained_on_no_rate_are_not_scored():
     for fd in sc.folds:
         fd["scored"] = fd["test"]
     assert sc.gain(cand, base)["folds"][0]["total"] < -1e4
+
+
+def test_a_fit_refused_at_a_bound_is_retried_with_the_unidentified_knobs_held(tmp_path):
+    """A temperature-rate term near its -2000 deg/h per K/min bound on an oven record with no applied rate (the
+    sense gain not identifiable, calibrated at +3 %): with every knob free the joint fit lowers the gain and
+    pushes the term past the bound (refused as pinned, the 90147/2 miss); retried with the flagged knobs held at
+    their calibrated values it lies inside, is accepted alone and reads the truth to 1.5 %. The report says
+    which knobs were held."""
+    from fmvmg_sim.diagnosis.pipeline import diagnose
+    from fmvmg_sim.diagnosis.report import write_report
+    from tests.test_diagnosis_helpers import NOMINAL, oven_record
+    g_true = -1995.0
+    rec, _ = oven_record(tmp_path, "trate", {"temperature_rate": {"g_dph_per_K_per_min": g_true}},
+                         theta={"sense_gain_rel": 0.03, "quadrature_rel": 0.17})
+    rep = diagnose(str(rec), str(NOMINAL), n_null=2, progress=False, log=lambda m: None)
+    assert not rep["calibration"]["parameters"]["sense_gain_rel"]["identifiable"]
+    assert rep["accepted"] == ["temperature_rate"]
+    row = rep["ranked"][0]
+    assert row["effect"] == "temperature_rate" and "sense_gain_rel" in row["held_knobs"]
+    assert abs(row["params"]["g_dph_per_K_per_min"] / g_true - 1.0) < 0.015
+    assert row["nominal_shift"]["sense_gain_rel"] == pytest.approx(0.0, abs=1e-9)
+    write_report(rep, tmp_path / "rep")
+    assert "Fitted with knobs held: temperature_rate (" in (tmp_path / "rep" / "report.md").read_text()
+
+
+@pytest.mark.parametrize("g_retried, taken", [(2000.0, False), (1998.0, False), (1941.0, True)])
+def test_a_retried_fit_is_taken_only_strictly_inside_its_bounds(monkeypatch, g_retried, taken):
+    """The retry of a fit refused at a bound is scored only when it lands strictly inside (not within
+    PIN_TOLERANCE, 4 deg/h per K/min here, of the +2000 bound): on the bound its parameter has no standard error
+    and fails the significance test, so taking it would swap a refusal the pair search can still mend for an
+    insignificant single fit (90157/15, session 37)."""
+    from types import SimpleNamespace
+    from fmvmg_sim.diagnosis import attribute as A
+    free = {"fit": None, "in_bounds": False, "bound_reason": A.BOUND_REASON, "held_knobs": []}
+    held = {"fit": SimpleNamespace(effects={"temperature_rate": {"g_dph_per_K_per_min": g_retried}}),
+            "in_bounds": True, "bound_reason": None, "held_knobs": []}
+    monkeypatch.setattr(A, "_evaluate", lambda *a, hold, **k: dict(held if hold else free))
+    scorer = SimpleNamespace(cal=SimpleNamespace(identifiable={"sense_gain_rel": False, "quadrature_rel": True}))
+    ev = A.evaluate(scorer, ["temperature_rate"], {}, np.zeros(1))
+    assert (ev["fit"] is not None) is taken
+    assert ev["held_knobs"] == (["sense_gain_rel"] if taken else [])

@@ -591,9 +591,36 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
     Returns
     -------
     dict
+        ``held_knobs``: the knobs held at their calibrated values (empty unless the retry below was used).
+
+    Notes
+    -----
+    A fit refused as outside or pinned at a physical bound is fitted once more with the nominal knobs the
+    calibration flags as not identifiable held at their calibrated values (:class:`.model.EffectModel`,
+    ``hold_unidentified``), and that fit is scored instead when it is admissible and strictly inside its bounds
+    (no parameter within :data:`PIN_TOLERANCE` of a non-zero bound). The record does not
+    determine those knobs, so the free fit can trade the effect's amplitude against one of them: a
+    temperature-rate term of -1920 deg/h per K/min on a record with no applied rate was pinned at -2000 with
+    the sense gain moved from +3 % to -3 % (90147/2), and is -1908 with the gain held. Only the refused fits
+    are retried: the free knobs' slack also absorbs model error (docs/diagnosis_results.md, session 36). A
+    retried fit that lands on its bound is not taken: a parameter at an active bound has no standard error, so
+    the retry would swap a refusal for an insignificant fit (a temperature rate of +1920 retried onto its +2000
+    bound ended "unexplained", 90157/15, where the free search had found it; session 37).
     """
+    ev = _evaluate(scorer, names, base, base_pred_train, fixed, k_base, new, hold=False)
+    if ev.get("bound_reason") == BOUND_REASON and not all(scorer.cal.identifiable.values()):
+        held = _evaluate(scorer, names, base, base_pred_train, fixed, k_base, new, hold=True)
+        if held["fit"] is not None and held["in_bounds"] and not bound_check(held["fit"].effects)[1]:
+            held["held_knobs"] = sorted(k for k, ok in scorer.cal.identifiable.items() if not ok)
+            return held
+    return ev
+
+
+def _evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarray, fixed: dict | None,
+              k_base: int, new: list | None, hold: bool) -> dict:
+    """:func:`evaluate` for one choice of ``hold`` (the flagged knobs held, or every knob free)."""
     try:
-        em = EffectModel(scorer.f, scorer.cal, names, fixed)
+        em = EffectModel(scorer.f, scorer.cal, names, fixed, hold_unidentified=hold)
         mf = em.fit(scorer.train)
         preds = scorer.fold_predictions(mf.refit)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # outside the model's domain
@@ -610,6 +637,7 @@ def evaluate(scorer: Scorer, names: list, base: dict, base_pred_train: np.ndarra
           "in_bounds": inb, "bound_reason": reason, "param_significant": z > PARAM_Z_MIN, "param_z": z}
     ev["why_not"] = why_not(ev, scorer.folds_ok(g))
     ev["accepted"] = not ev["why_not"]
+    ev["held_knobs"] = []
     return ev
 
 

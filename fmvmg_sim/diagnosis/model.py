@@ -155,10 +155,8 @@ class EffectModel:
         record does not determine them, so an effect's amplitude can trade against them: with no applied rate
         the sense gain is free within its prior, and a temperature-rate term beside it can take any size
         within the gain's tolerance (and be refused as pinned at its bound). Default False: every knob free,
-        as the diagnosis fits. Measured in session 36 (docs/diagnosis_results.md), holding them did more harm
-        than good both in every fit (the knobs' slack absorbs model error a spurious second effect otherwise
-        buys) and in a retry of the fits refused at a bound (a retried fit can land exactly on the bound,
-        where it has no standard error); the option is kept for such studies.
+        whose slack also absorbs model error (the attribution retries only a fit refused at a bound with
+        them held: :func:`.attribute.evaluate`).
     """
 
     def __init__(self, fitter: Fitter, cal: Calibration, names: list, fixed: dict | None = None,

@@ -630,4 +630,6 @@ def _row(name: str, ev: dict, before: dict, after: dict, primary: str, cal_theta
             "param_significant": ev["param_significant"], "why_not": list(ev.get("why_not") or []),
             # how far the nominal knobs move from their calibration when the effect is fitted beside them
             "nominal_shift": {k: float(ev["fit"].theta[k] - v) for k, v in cal_theta.items() if k in ev["fit"].theta},
+            # knobs held at their calibrated values (the fit with them free was refused at a bound)
+            "held_knobs": list(ev.get("held_knobs") or []),
             "shrink_by_metric": sh}

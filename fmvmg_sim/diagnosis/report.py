@@ -181,6 +181,12 @@ def markdown(rep: dict) -> str:
               f"uncertain by more than {_fmt(sd, 'g')} noise sigmas (a knob its parameter makes collinear on that "
               "training window): it tests one arbitrary point of that uncertainty, not the effect, and is left out "
               "of the candidate's held-out interval and fold counts."]
+    held = [row for row in rep["ranked"] if row.get("held_knobs")]
+    if held:
+        L += ["", "Fitted with knobs held: " + "; ".join(f"{row['effect']} ({', '.join(row['held_knobs'])})" for row in held)
+              + ". With every knob free its fit was refused at a physical bound; the record does not identify these "
+              "knobs (calibration table), so the effect had traded its amplitude against them, and it was fitted again "
+              "with them held at their calibrated values."]
     c = rep.get("combined")
     if c:
         L += ["", f"## 4. Gap before and after ({' + '.join(c['effects'])}), held-out data", "",
