@@ -156,7 +156,7 @@ class EffectModel:
         the sense gain is free within its prior, and a temperature-rate term beside it can take any size
         within the gain's tolerance (and be refused as pinned at its bound). Default False: every knob free,
         whose slack also absorbs model error (the attribution retries only a fit refused at a bound with
-        them held: :func:`.attribute.evaluate`).
+        them held, and takes the retried fit only strictly inside its bounds: :func:`.attribute.evaluate`).
     """
 
     def __init__(self, fitter: Fitter, cal: Calibration, names: list, fixed: dict | None = None,

@@ -185,7 +185,7 @@ def markdown(rep: dict) -> str:
     if held:
         L += ["", "Fitted with knobs held: " + "; ".join(f"{row['effect']} ({', '.join(row['held_knobs'])})" for row in held)
               + ". With every knob free its fit was refused at a physical bound; the record does not identify these "
-              "knobs (calibration table), so the effect had traded its amplitude against them, and it was fitted again "
+              "knobs (calibration table), so the effect's amplitude can trade against them, and it was fitted again "
               "with them held at their calibrated values."]
     c = rep.get("combined")
     if c:
