@@ -316,6 +316,64 @@ def test_single_effects_are_split_by_what_the_training_window_carries():
     assert sc["single_above"] == 6 and sc["misses_by_cause"]["single_above"]["train_below_limit"] == 1
 
 
+def test_the_ceiling_puts_right_every_miss_the_record_allows():
+    # a miss counts as reachable unless its cause is one the record or the forward-chained protocol forbids
+    # (IMPOSSIBLE_CAUSES); a criteria miss of a single effect whose training window carries it below the limit
+    # reads as train_below_limit (rows stored before labels carried snr_train); failed diagnoses and pairs
+    # inexact through an extra effect count as reachable; below-limit singles are outside the denominator
+    from fmvmg_sim.diagnosis.benchmark import IMPOSSIBLE_CAUSES, MISS_CAUSES, ceilings, score
+    from fmvmg_sim.diagnosis.benchmark_report import format_scores
+    assert set(IMPOSSIBLE_CAUSES) < set(MISS_CAUSES)
+
+    def res(accepted=(), rows=None, verdict=None):
+        rw = {a: {"shrink": 0.9, "params": {}, "accepted": True, "folds_testable": 3, "why_not": []} for a in accepted}
+        rw.update(rows or {})
+        return {"verdict": verdict or ("explained" if accepted else "none"), "accepted": list(accepted),
+                "ranked": list(accepted) + list(rows or {}), "ambiguous_with": {}, "rows": rw}
+
+    def single(case, effect, snr_train=30.0, tier="above"):
+        return {"case": case, "effects": {effect: {}}, "tier": tier, "snr": 30.0, "snr_by_effect": {effect: 30.0},
+                "snr_train": snr_train, "tier_train": "above" if snr_train >= 10 else "near"}
+    nope = {"folds_testable": 3, "why_not": ["dBIC not below -10"], "accepted": False}
+    pair = {"q_factor_drift": {}, "reference_drift": {}}
+    labs = [single(0, "duffing"), single(1, "feedthrough"), single(2, "temperature_rate", snr_train=4.0),
+            single(3, "thermal_lag"), single(4, "quantization"), single(5, "duffing", tier="below"),
+            {"case": 6, "effects": pair, "tier": "above", "snr": 90.0,
+             "snr_by_effect": {"q_factor_drift": 105.0, "reference_drift": 95.0},
+             "snr_separable_by_effect": {"q_factor_drift": 0.11, "reference_drift": 13.0}},
+            {"case": 7, "effects": pair, "tier": "above", "snr": 90.0,
+             "snr_by_effect": {"q_factor_drift": 105.0, "reference_drift": 95.0},
+             "snr_separable_by_effect": {"q_factor_drift": 40.0, "reference_drift": 30.0}},
+            {"case": 8, "effects": pair, "tier": "above", "snr": 90.0}]
+    results = [res(["duffing"]),                                             # hit
+               res(rows={"feedthrough": nope}),                              # criteria: reachable
+               res(rows={"temperature_rate": nope}),                         # training window below: out of reach
+               res(rows={"thermal_lag": dict(nope, folds_testable=0)}),      # no held-out test: out of reach
+               {"error": "boom"},                                            # failed: reachable
+               res(rows={"duffing": nope}),                                  # below the limit: not counted
+               res(["reference_drift"]),                                     # inseparable member: out of reach
+               res(["reference_drift"]),                                     # look-alike/criteria: reachable
+               res(["q_factor_drift", "reference_drift", "duffing"])]       # extra effect: reachable
+    sc = score(labs, results)
+    c = sc["ceiling"]
+    assert sc["top2"] == 0.2 and sc["single_above"] == 5 and sc["pairs_exact"] == 0.0
+    assert (c["top2"]["reachable"], c["top2"]["cases"]) == (3, 5) and c["top2"]["rate"] == 0.6
+    assert c["top2"]["out_of_reach"] == {"train_below_limit": 1, "no_heldout_test": 1}
+    assert (c["pairs_exact"]["reachable"], c["pairs_exact"]["cases"]) == (2, 3)
+    assert c["pairs_exact"]["out_of_reach"] == {"inseparable": 1}
+    assert c["top2"]["ci95"][0] < 0.6 < c["top2"]["ci95"][1]
+    # rows stored before labels carried the training-window SNR: criteria there reads as the training window
+    old = [dict(r, miss={"temperature_rate": "criteria"}) if r["case"] == 2 else r for r in sc["rows"]]
+    assert ceilings(old)["top2"]["reachable"] == 3
+    assert ceilings([dict(r, snr_train=None) if r["case"] == 2 else r for r in old])["top2"]["reachable"] == 4
+    md = format_scores(sc)
+    row = {ln.split("|")[1].strip(): [x.strip() for x in ln.split("|")[2:-1]] for ln in md.splitlines()
+           if ln.startswith("| ") and ln.count("|") == 8}
+    assert row["ceiling, top-2, single effects above the limit"][:3] == ["0.200", "0.600", "3 of 5"]
+    assert row["ceiling, top-2, single effects above the limit"][-1] == "no (decided)"  # 0.6 (0.23-0.88) < 0.98
+    assert row["ceiling, exact pairs"][:3] == ["0.000", "0.667", "2 of 3"]
+
+
 def test_help_states_the_case_mix_in_plain_percent(capsys):
     import pytest
     with pytest.raises(SystemExit) as ex:

@@ -34,6 +34,10 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
   on the diagnoser's training window as well (label ``tier_train``, :func:`.cases.training_snr`), beside them
   those below it there: a diagnostic of where the misses lie, beside the target's definition, not in its place
   (labels without ``tier_train`` are not counted in it);
+* ``ceiling``: top-1, top-2 and exact pairs as they would read if every miss were put right whose cause the record
+  and the forward-chained protocol allow (:func:`ceilings`, :data:`IMPOSSIBLE_CAUSES`): an upper bound on what any
+  diagnosis could reach on these cases under that protocol, so that a target beyond it is seen to be out of reach of
+  the diagnosis rather than missed by it;
 * ``ci95``: the 95 % Wilson score interval of each rate above that is a proportion of counted cases
   (:data:`INTERVALS`, :func:`wilson_interval`), so that a rate over a few dozen cases is read with its
   uncertainty and a target can be seen to be met, missed, or not yet decided.
@@ -237,6 +241,66 @@ def miss_cause(effect: str, truth: list, accepted: list, ambiguous: set, rows: d
     return "criteria"
 
 
+#: Miss causes no diagnosis can put right on that record under the forward-chained protocol: an effect that acts only
+#: through a temperature change on training windows at one temperature, flicker beside a coarser converter, a pair
+#: member the other explains to within the detection limit (label truth: :func:`.cases.separable_snr`), an effect no
+#: held-out fold can test, and one the training window carries below the limit. The others (``indistinguishable``,
+#: ``look_alike``, ``criteria``, ``beside_stronger``, ``ranked_second``), errors and extra accepted effects count as
+#: fixable in :func:`ceilings`, which is therefore an upper bound.
+IMPOSSIBLE_CAUSES = ("one_temperature", "hidden_by_converter", "inseparable", "no_heldout_test", "train_below_limit")
+
+
+def _causes(r: dict) -> set:
+    """The miss causes of a case row; ``criteria`` or ``look_alike`` of a single effect whose training window carries
+    it below the limit read as ``train_below_limit`` (rows scored before labels carried ``snr_train``; the order of
+    :func:`miss_cause`, which tests the training window before those two)."""
+    out = set()
+    for c in (r.get("miss") or {}).values():
+        if (c in ("criteria", "look_alike") and len(r["truth"]) == 1 and r.get("snr_train") is not None
+                and r["snr_train"] < SEPARABLE_SNR_MIN):
+            c = "train_below_limit"
+        out.add(c)
+    return out
+
+
+def ceilings(rows: list[dict]) -> dict:
+    """Top-1, top-2 and exact pairs if every miss whose cause the record and protocol allow were put right.
+
+    A missed case counts as reachable unless a missing true effect's cause is in :data:`IMPOSSIBLE_CAUSES`; a case
+    whose diagnosis failed, or a pair inexact through an extra accepted effect, counts as reachable.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Case rows of :func:`score` (``truth``, ``tier``, the verdict flags and ``miss``), from one run or pooled.
+
+    Returns
+    -------
+    dict
+        ``{"top1" | "top2": ..., "pairs_exact": ...}``, each ``{"reachable": k, "cases": n, "rate": k / n,
+        "ci95": [low, high], "out_of_reach": {cause: cases}}`` over the single effects above the detection limit
+        and over all pairs (the denominators of the targets); ``rate`` and ``ci95`` are None with no case.
+    """
+    out = {}
+    for key, sel in (("top1", lambda r: len(r["truth"]) == 1 and r["tier"] == "above"),
+                     ("top2", lambda r: len(r["truth"]) == 1 and r["tier"] == "above"),
+                     ("pairs_exact", lambda r: len(r["truth"]) == 2)):
+        flag = "pair_exact" if key == "pairs_exact" else key
+        cases = [r for r in rows if flag in r and sel(r)]
+        k, lost = 0, {}
+        for r in cases:
+            bad = sorted(_causes(r) & set(IMPOSSIBLE_CAUSES)) if not r[flag] else []
+            if bad:
+                for c in bad:
+                    lost[c] = lost.get(c, 0) + 1
+            else:
+                k += 1
+        n = len(cases)
+        out[key] = {"reachable": k, "cases": n, "rate": k / n if n else None, "ci95": wilson_interval(k, n),
+                    "out_of_reach": lost}
+    return out
+
+
 #: Rates given a 95 % interval in ``ci95``: (rate key, key of the number of cases it is a proportion of).
 INTERVALS = (("false_alarm_rate", "null_cases"), ("top1", "single_above"), ("top2", "single_above"),
              ("pairs_exact", "pair_cases"), ("pairs_exact_above", "pair_cases_above"),
@@ -430,6 +494,7 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             "top1_ci95": wilson_interval(round(k1 * n), n) if n else None,
             "top2_ci95": wilson_interval(round(k2 * n), n) if n else None}
     out["after_training_note"] = after_training_note_rates(rows)
+    out["ceiling"] = ceilings(rows)
     out["above_by_snr"] = []
     for lo, hi in SNR_BANDS:
         band = [r for r in rows if "top1" in r and r["tier"] == "above" and lo <= r["snr"] < hi]

@@ -6,7 +6,7 @@ adds); knows nothing of how the cases were made or diagnosed.
 
 from __future__ import annotations
 
-from .benchmark import MISS_CAUSES
+from .benchmark import IMPOSSIBLE_CAUSES, MISS_CAUSES
 
 #: The issue's targets: (score key, count key, comparison, target, label).
 TARGETS = (
@@ -73,6 +73,18 @@ def format_scores(sc: dict) -> str:
                  f"{op} {target:g} | {_met(v, cis.get(key), op, target)} |")
     L += ["", "Intervals: Wilson score, 95 %, on the counted cases; \"decided\" when the whole interval lies on one "
           "side of the target."]
+    ceil = sc.get("ceiling") or {}
+    if any((ceil.get(k) or {}).get("cases") for k in ceil):
+        L += ["", "How far any diagnosis could go on these cases under the forward-chained protocol: each score with every "
+              "miss put right but those whose cause the record or the protocol forbids (" +
+              ", ".join(f"`{c}`" for c in IMPOSSIBLE_CAUSES) + "); an upper bound:", "",
+              "| score | measured | ceiling | cases | 95 % interval | target | target within reach |",
+              "|---|---|---|---|---|---|---|"]
+        for key, nkey, op, target, label in TARGETS:
+            d = ceil.get(key) or {}
+            if d.get("cases"):
+                L.append(f"| ceiling, {label} | {_pct(sc.get(key))} | {_pct(d['rate'])} | {d['reachable']} of {d['cases']} | "
+                         f"{_interval(d['ci95'])} | {op} {target:g} | {_met(d['rate'], d['ci95'], op, target)} |")
     L += ["", "| other score | measured | cases |", "|---|---|---|",
           f"| exact pairs, both members above the limit | {_pct(sc.get('pairs_exact_above'))} | "
           f"{_count(sc.get('pairs_exact_above'), sc.get('pair_cases_above'))} |",
