@@ -623,3 +623,55 @@ def test_a_retried_fit_is_taken_only_strictly_inside_its_bounds(monkeypatch, g_r
     ev = A.evaluate(scorer, ["temperature_rate"], {}, np.zeros(1))
     assert (ev["fit"] is not None) is taken
     assert ev["held_knobs"] == (["sense_gain_rel"] if taken else [])
+
+
+def _swap_attribution(monkeypatch, first, lookalike, lookalike_fit, pair_gain, pair_accepted=True):
+    """Forward selection on fake evaluations: ``first`` (accepted alone) and its look-alike tie, the second effect
+    H passes beside ``first``; the forward-selected pair gains 13.0 over the nominal model (interval 11-15), the
+    look-alike beside H ``pair_gain``."""
+    import fmvmg_sim.diagnosis.attribute as A
+    table = {frozenset({first}): (10.0, 6.0, True, _Fit()),
+             frozenset({lookalike}): (9.5, 5.0, True, lookalike_fit),
+             frozenset({first, H}): (3.0, 1.0, True, _Fit()),             # H beside the first: gains 3 over it
+             frozenset({lookalike, H}): (pair_gain, pair_gain - 2.0, pair_accepted, lookalike_fit)}
+
+    def fake_evaluate(scorer, names_, base, base_pred_train, fixed=None, k_base=0, new=None):
+        gain, lo, accepted, fit = table.get(frozenset(names_), (-1.0, -2.0, False, None))
+        ev = _tie(sorted(names_), gain, lo, accepted=accepted, fit=fit)
+        return dict(ev, preds={"tag": "+".join(sorted(names_))}, in_bounds=True, delta_bic=-20.0 if accepted else 0.0)
+
+    class Scorer(_FakeScorer):
+        @staticmethod
+        def folds_ok(g):
+            return True
+
+        @staticmethod
+        def gain(cand, base):   # the forward-selected pair over the nominal model
+            assert cand["tag"] == "+".join(sorted((first, H))) and base["tag"] == "nominal"
+            return {"gain": 13.0, "ci": [11.0, 15.0]}
+
+    monkeypatch.setattr(A, "evaluate", fake_evaluate)
+    monkeypatch.setattr(A, "EffectModel", _FakeModel)
+    monkeypatch.setattr(A, "_significant_param", lambda fit, names: True)
+    monkeypatch.setattr(A, "_beats", lambda scorer, ev, other: True)
+    return A.attribute(Scorer(), max_effects=2)
+
+
+@pytest.mark.parametrize("pair_gain, accepted, swapped", [(14.0, True, True), (12.5, True, False),
+                                                           (14.0, False, False)])
+def test_a_lookalike_that_makes_the_better_pair_takes_the_first_place(monkeypatch, pair_gain, accepted, swapped):
+    m, qd = "mode_split_drift", "quadrature_drift"
+    att = _swap_attribution(monkeypatch, m, qd, _Fit(), pair_gain, accepted)
+    if swapped:     # the look-alike beside H explains the held-out data better than the first effect beside H
+        assert att["selected"] == [qd, H] and att["final"]["names"] == sorted([qd, H])
+        assert att["pair_alternatives"] == {qd: [m]}
+    else:           # a look-alike pair that gains less, or does not pass, only stays the first effect's look-alike
+        assert att["selected"] == [m, H] and att["final"]["names"] == sorted([m, H])
+        assert att["pair_alternatives"] == {m: [qd]}
+
+
+def test_a_reference_drift_without_its_vref_part_does_not_take_the_q_drifts_place(monkeypatch):
+    att = _swap_attribution(monkeypatch, Q, R, _RefFit(3e-9, 3e-3), 14.0)
+    assert att["selected"] == [Q, H] and att["pair_alternatives"] == {Q: [R]}
+    att = _swap_attribution(monkeypatch, Q, R, _RefFit(1.6e-7, 1.3e-3), 14.0)   # with its Vref part it may
+    assert att["selected"] == [R, H] and att["pair_alternatives"] == {R: [Q]}

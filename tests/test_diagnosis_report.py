@@ -91,3 +91,12 @@ def test_a_statistic_its_null_does_not_describe_is_named_in_the_localisation():
     # a report written before the flag existed reads as before
     del fd["comparable"]
     assert "Not comparable" not in markdown(rep)
+
+
+def test_a_replaced_first_effect_is_named_with_both_pair_gains():
+    from fmvmg_sim.diagnosis.report import replaced_first_lines
+    L = replaced_first_lines({"effect": "quadrature_drift", "by": "mode_split_drift", "pair_gain_before": 4.37,
+                              "pair_gain_after": 4.402})
+    assert L[0].startswith("mode_split_drift replaces quadrature_drift, which forward selection chose first")
+    assert "(4.40 against 4.37 nats per held-out block" in L[0] and L[-1] == ""
+    assert replaced_first_lines(None) == []

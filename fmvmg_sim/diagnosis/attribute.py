@@ -686,14 +686,16 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
         ``single``: {effect: evaluation}; ``selected``: list of effect names; ``final``: evaluation of the
         selected set (or None); ``pair_scan``: {effect: evaluation with the first};
         ``pair_alternatives``: {member of a pair (fitted from scratch, or forward-selected, first or second):
-        look-alikes that could replace it}.
+        look-alikes that could replace it}; ``replaced_first``: None, or ``{"effect", "by", "pair_gain_before",
+        "pair_gain_after"}`` when a look-alike of the forward-selected first effect made the better pair with the
+        second (:func:`better_first`).
     """
     base = scorer.nominal
     single = {}
     for n in tqdm(DETERMINISTIC, disable=not progress, file=sys.stderr, desc="attribution", unit="effect"):
         single[n] = evaluate(scorer, [n], base, scorer.nominal_train_pred)
     acc = [n for n in single if single[n]["accepted"]]
-    selected, final, pair_scan, pair_alternatives = [], None, {}, {}
+    selected, final, pair_scan, pair_alternatives, replaced_first = [], None, {}, {}, None
     if acc:
         best = max(acc, key=lambda n: single[n]["gain"]["gain"])
         best = prefer_q_drift(single, best, scorer.vref_V)
@@ -720,17 +722,71 @@ def attribute(scorer: Scorer, progress: bool = False, max_effects: int = 2, top_
                 # interval) could replace it
                 first_alts = [a for a in ambiguity(single, best)
                               if a != second and not (a in NONLINEAR and second in NONLINEAR)]
-                lo_pair = scorer.gain(final["preds"], base)["ci"][0] if first_alts else None
+                g_pair = scorer.gain(final["preds"], base) if first_alts else None
+                alt_pairs = {}
                 for alt in first_alts:
                     ev = evaluate(scorer, sorted((alt, second)), base, scorer.nominal_train_pred)
-                    if ev["fit"] is not None and ev["in_bounds"] and ev["gain"]["gain"] >= lo_pair:
+                    alt_pairs[alt] = ev
+                    if ev["fit"] is not None and ev["in_bounds"] and ev["gain"]["gain"] >= g_pair["ci"][0]:
                         pair_alternatives.setdefault(best, []).append(alt)
+                swap = better_first(scorer, single, best, second, g_pair, alt_pairs)
+                if swap is not None:
+                    # the pair with the look-alike in first place explains the held-out data better than the
+                    # forward-selected one: the greedy first step chose on the first effect alone
+                    alts = [a for a in pair_alternatives.get(best, []) if a != swap] + [best]
+                    pair_alternatives.pop(best, None)
+                    pair_alternatives[swap] = alts
+                    replaced_first = {"effect": best, "by": swap, "pair_gain_before": float(g_pair["gain"]),
+                                      "pair_gain_after": float(alt_pairs[swap]["gain"]["gain"])}
+                    selected, final = [swap, second], alt_pairs[swap]
     elif max_effects > 1:
         # no single effect passes, but a pair may: each alone mis-fits the other's signature (pinned at a
         # bound, or extrapolating badly)
         selected, final, pair_scan, pair_alternatives = pairs_from_scratch(scorer, single)
     return {"single": single, "selected": selected, "final": final, "pair_scan": pair_scan,
-            "pair_alternatives": pair_alternatives}
+            "pair_alternatives": pair_alternatives, "replaced_first": replaced_first}
+
+
+def better_first(scorer: Scorer, single: dict, first: str, second: str, g_pair: dict | None,
+                 alt_pairs: dict) -> str | None:
+    """A look-alike of the forward-selected first effect that makes a better pair with the same second one.
+
+    Forward selection picks the first effect on its own held-out gain; when a look-alike explains the record
+    as well alone, the second effect decides which of the two the record holds. The look-alike replaces the
+    first effect when its pair with the second effect passes as a pair fitted from scratch does (accepted, each
+    member's parameters significant, beating each member alone held out, not one signature twice) and its
+    held-out gain over the nominal model exceeds the forward-selected pair's: the best pair among those fitted,
+    as :func:`pairs_from_scratch` chooses.
+
+    Parameters
+    ----------
+    scorer : Scorer
+    single : dict
+        Single-effect evaluations by effect.
+    first, second : str
+        The forward-selected first and second effects.
+    g_pair : dict or None
+        The forward-selected pair's held-out gain over the nominal model (:meth:`Scorer.gain`).
+    alt_pairs : dict
+        ``{look-alike: evaluation of (look-alike, second) against the nominal model}``.
+
+    Returns
+    -------
+    str or None
+        The look-alike with the largest such gain, or None.
+    """
+    ok = []
+    for alt, ev in alt_pairs.items():
+        if ev["fit"] is None or not ev["accepted"] or ev["gain"]["gain"] <= g_pair["gain"]:
+            continue
+        _refuse_q_and_rectifier(ev, scorer.vref_V)
+        if (alt == "reference_drift" and first == "q_factor_drift"
+                and reference_lacks_vref(ev["fit"].effects["reference_drift"], scorer.vref_V)):
+            continue  # the Q drift stays in its place (:func:`prefer_q_drift`)
+        if (ev["accepted"] and all(_significant_param(ev["fit"], [m]) for m in (alt, second))
+                and all(_beats(scorer, ev, single[m]) for m in (alt, second))):
+            ok.append(alt)
+    return max(ok, key=lambda a: alt_pairs[a]["gain"]["gain"]) if ok else None
 
 
 def pairs_from_scratch(scorer: Scorer, single: dict) -> tuple[list, dict | None, dict, dict]:

@@ -47,6 +47,27 @@ def _fmt(v, spec=".4g"):
     return "-" if v is None else format(v, spec) if isinstance(v, (int, float)) else str(v)
 
 
+def replaced_first_lines(rf: dict | None) -> list[str]:
+    """The paragraph on a forward-selected first effect a look-alike replaced (the report's ``replaced_first``).
+
+    Parameters
+    ----------
+    rf : dict or None
+        ``{"effect", "by", "pair_gain_before", "pair_gain_after"}`` (:func:`.attribute.better_first`).
+
+    Returns
+    -------
+    list of str
+        Markdown lines; none when nothing was replaced.
+    """
+    if not rf:
+        return []
+    return [f"{rf['by']} replaces {rf['effect']}, which forward selection chose first: beside the same second "
+            f"effect it gains more on held-out data ({rf['pair_gain_after']:.2f} against "
+            f"{rf['pair_gain_before']:.2f} nats per held-out block over the nominal model). The two remain "
+            "look-alikes (see the ambiguity).", ""]
+
+
 def in_sample_lines(hint: dict | None) -> list[str]:
     """The report's section on in-sample candidates (empty without them).
 
@@ -104,6 +125,7 @@ def markdown(rep: dict) -> str:
               "passes every held-out criterion but the fold count (its pooled held-out gain is above zero, but too few "
               "of the folds that can test it pass on their own). Weaker evidence than a full pass; a record that "
               "repeats its temperature excursion tests it.", ""]
+    L += replaced_first_lines(rep.get("replaced_first"))
     if rep["ambiguous_with"]:
         L.append("## Ambiguity")
         for a, others in rep["ambiguous_with"].items():
