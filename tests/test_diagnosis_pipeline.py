@@ -18,6 +18,21 @@ def test_a_second_effect_that_did_not_pass_alone_ranks_second():
                    "feedthrough", "duffing"]
 
 
+def test_look_alikes_rank_right_after_the_verdict_by_gain():
+    """Fresh case 90501/33: mode-split drift accepted, its look-alikes phase drift (the truth; the largest held-out
+    gain, but not significant alone) and quadrature drift (passed alone). Feedthrough passed alone with a gain below
+    the accepted effect's interval, so it is no look-alike. The look-alikes come second and third, by gain."""
+    rows = [_row("mode_split_drift", True, 0.083), _row("quadrature_drift", True, 0.064),
+            _row("feedthrough", True, 0.036), _row("demod_phase_drift", False, 0.097),
+            _row("temperature_rate", False, -0.008)]
+    amb = ["demod_phase_drift", "quadrature_drift"]
+    out = [r["effect"] for r in rank_rows(rows, ["mode_split_drift"], amb)]
+    assert out == ["mode_split_drift", "demod_phase_drift", "quadrature_drift", "feedthrough", "temperature_rate"]
+    # without the ambiguity set: passed alone first, so the truth ranks fourth (the ranking before session 42)
+    out = [r["effect"] for r in rank_rows(rows, ["mode_split_drift"])]
+    assert out == ["mode_split_drift", "quadrature_drift", "feedthrough", "demod_phase_drift", "temperature_rate"]
+
+
 def test_nothing_accepted_ranks_by_passing_alone_then_gain():
     rows = [_row("a", False, 5.0), _row("b", True, 1.0), _row("c", False, None), _row("d", True, 2.0)]
     assert [r["effect"] for r in rank_rows(rows, [])] == ["d", "b", "a", "c"]

@@ -280,11 +280,14 @@ def design_check(cover: dict, min_span_K: float = MIN_TRAIN_SPAN_K) -> dict:
             "not_identifiable": [] if ok else list(TEMPERATURE_DRIVEN)}
 
 
-def rank_rows(rows: list[dict], accepted: list[str]) -> list[dict]:
+def rank_rows(rows: list[dict], accepted: list[str], ambiguous=()) -> list[dict]:
     """The report's ranking of the candidate rows.
 
-    The verdict's effects come first, in the verdict's order; then the candidates that passed alone, then
-    the rest, each of these two groups by held-out gain.
+    The verdict's effects come first, in the verdict's order; then its look-alikes (the ambiguity-set members:
+    in bounds, held-out interval above zero and held-out gain inside the accepted effect's interval), by held-out
+    gain whether or not they passed alone; then the candidates that passed alone, then the rest, each of these two
+    groups by held-out gain. A look-alike explains the same gap as well as the accepted effect, so it is the
+    runner-up before an effect that passed alone but explains the gap worse (its gain below that interval).
 
     Parameters
     ----------
@@ -292,6 +295,8 @@ def rank_rows(rows: list[dict], accepted: list[str]) -> list[dict]:
         One per effect, with ``effect``, ``accepted`` (passed alone) and ``heldout_gain``.
     accepted : list of str
         The verdict's effects (a second effect may not have passed alone).
+    ambiguous : iterable of str, optional
+        The ambiguity-set members (every effect named in the report's ``ambiguous_with``).
 
     Returns
     -------
@@ -299,8 +304,14 @@ def rank_rows(rows: list[dict], accepted: list[str]) -> list[dict]:
         The rows, reordered.
     """
     order = {n: i for i, n in enumerate(accepted)}
-    return sorted(rows, key=lambda r: (order.get(r["effect"], len(order)), 0 if r["accepted"] else 1,
-                                       -(r["heldout_gain"] if r["heldout_gain"] is not None else -1e300)))
+    amb = set(ambiguous) - set(accepted)
+
+    def key(r):
+        group = 0 if r["effect"] in amb else 1 if r["accepted"] else 2
+        gain = r["heldout_gain"] if r["heldout_gain"] is not None else -1e300
+        return order.get(r["effect"], len(order)), group, -gain
+
+    return sorted(rows, key=key)
 
 
 def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, progress: bool | None = None,
@@ -538,8 +549,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         hint = {"note": "each effect fitted on the whole record against the nominal model refitted there; "
                         "not validated on held-out data, so not an attribution",
                 "candidates": cands}
-    ranked = rank_rows(ranked, accepted)
     lookalike_of = {o: a for a, others in amb.items() for o in others}
+    ranked = rank_rows(ranked, accepted, lookalike_of)
     for r in ranked:
         r["accepted"] = r["effect"] in accepted
         if r["accepted"]:
@@ -556,7 +567,9 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         elif r["effect"] == "quantization":
             r["why_not"] = ["the output's lattice is the nominal converter's"]
         elif r["effect"] in lookalike_of:
-            r["why_not"] = [f"look-alike of {lookalike_of[r['effect']]}: explains the same gap (see the ambiguity)"]
+            # the criteria it fails alone stay beside the note (none when it passed alone)
+            r["why_not"] = ([f"look-alike of {lookalike_of[r['effect']]}: explains the same gap (see the ambiguity)"]
+                            + [w for w in r.get("why_not") or [] if not w.startswith("passes alone")])
         elif r["effect"] == att.get("replaced_partial"):
             r["why_not"] = ["passes alone but leaves the located gap open; a pair fitted from scratch gains more"]
         elif not r.get("why_not"):
