@@ -569,7 +569,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         elif r["effect"] in lookalike_of:
             # the criteria it fails alone stay beside the note (none when it passed alone)
             r["why_not"] = ([f"look-alike of {lookalike_of[r['effect']]}: explains the same gap (see the ambiguity)"]
-                            + [w for w in r.get("why_not") or [] if not w.startswith("passes alone")])
+                            + list(r.get("why_not") or []))
         elif r["effect"] == att.get("replaced_partial"):
             r["why_not"] = ["passes alone but leaves the located gap open; a pair fitted from scratch gains more"]
         elif not r.get("why_not"):
