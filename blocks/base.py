@@ -34,6 +34,10 @@ class Block:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+#: Field names of each block class (the parameters :meth:`LinearBlock.state_space_matrices` keys its cache on).
+_FIELD_NAMES: dict = {}
+
+
 @dataclass
 class LinearBlock(Block):
     """A block with a linear face: ``linear_model()`` gives its python-control model.
@@ -71,6 +75,31 @@ class LinearBlock(Block):
         """
         return np.ones(self.linear_model().nstates)
 
+    def state_space_matrices(self) -> tuple:
+        """``A, B, C, D`` of :meth:`linear_model` as float arrays, rebuilt only when a parameter changes.
+
+        The envelope face evaluates a block at many frequencies with the same parameters (a root
+        search for the loop's oscillation frequency calls it dozens of times per steady state), and
+        building a named ``StateSpace`` costs far more than the evaluation. The matrices are kept
+        with the parameter values they were built from and reused while those values are unchanged;
+        callers must not modify them.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``(A, B, C, D)``.
+        """
+        names = _FIELD_NAMES.get(type(self))
+        if names is None:
+            names = _FIELD_NAMES[type(self)] = tuple(f.name for f in fields(self))
+        key = tuple(map(self.__dict__.get, names))
+        cached = self.__dict__.get("_state_space_cache")
+        if cached is None or cached[0] != key:
+            sys = self.linear_model()
+            cached = (key, tuple(np.asarray(m, dtype=float) for m in (sys.A, sys.B, sys.C, sys.D)))
+            self.__dict__["_state_space_cache"] = cached
+        return cached[1]
+
     def frequency_response(self, omega_rad_s: float) -> np.ndarray:
         """Complex gain matrix ``C (j w I - A)^-1 B + D`` at ``omega_rad_s`` (envelope face).
 
@@ -84,8 +113,7 @@ class LinearBlock(Block):
         ndarray
             Complex array of shape (n_outputs, n_inputs).
         """
-        sys = self.linear_model()
-        A, B, C, D = (np.asarray(m, dtype=float) for m in (sys.A, sys.B, sys.C, sys.D))
+        A, B, C, D = self.state_space_matrices()
         n = A.shape[0]
         if n == 0:
             return D.astype(complex)
