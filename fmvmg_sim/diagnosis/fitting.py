@@ -148,6 +148,8 @@ class Fitter:
         self._nom_jac = None
         self._nom_jac_theta = None
         self.table_builds = 0
+        #: Tables already built, by their exact inputs (:meth:`table`)
+        self._tables: dict = {}
         self._paths = {}
         #: Block sigma used to *score* models (model floor included); see :meth:`set_score_floor`.
         self.S_score = self.S
@@ -187,10 +189,22 @@ class Fitter:
         -------
         ResponseTable
         """
-        self.table_builds += 1
         eff = effects or {}
         rate = rate or self.has_rate
-        return response_table(self.device(theta, eff), self.grid, with_rate=rate, with_quad=quad)
+        # a fit often asks again for a table it built before (the nominal point of every effect without a
+        # device part, a retried fit's start): kept by the exact inputs, when they are all scalars (repr
+        # keeps every bit and the sign of zero; an array's repr may be abbreviated)
+        values = list(theta.values()) + [v for p in eff.values() for v in p.values()]
+        key = None
+        if all(np.ndim(v) == 0 for v in values):
+            key = repr((sorted(theta.items()), sorted((n, sorted(p.items())) for n, p in eff.items()), quad, rate))
+        tab = self._tables.get(key) if key is not None else None
+        if tab is None:
+            self.table_builds += 1
+            tab = response_table(self.device(theta, eff), self.grid, with_rate=rate, with_quad=quad)
+            if key is not None:
+                self._tables[key] = tab
+        return ResponseTable(tab.grid_C, tab.base.copy(), tab.d_rate.copy(), tab.d_quad.copy())
 
     def diff_table(self, t1: ResponseTable, t0: ResponseTable, step: float) -> ResponseTable:
         """(t1 - t0) / step as a table.

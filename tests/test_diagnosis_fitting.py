@@ -1,0 +1,37 @@
+"""Record fitting (fmvmg_sim.diagnosis.fitting): response tables kept by their exact inputs."""
+
+import numpy as np
+
+from fmvmg_sim.averaged import scale_factor_V_per_dps
+from fmvmg_sim.diagnosis.data import prepare
+from fmvmg_sim.diagnosis.fitting import Fitter
+from fmvmg_sim.diagnosis.forward import response_table
+from fmvmg_sim.diagram import build_diagram
+from fmvmg_sim.record import read_record
+from fmvmg_sim.scenario import load_scenario
+from tests.test_diagnosis_helpers import NOMINAL, oven_record
+
+
+def test_a_table_asked_for_again_is_the_same_table_and_not_shared(tmp_path):
+    """The second request for a table with the same inputs builds nothing and returns the first build's
+    numbers exactly, in arrays of its own; another knob value or effect builds afresh and equals a direct
+    build of that device."""
+    rec, _ = oven_record(tmp_path, "plain", noise=False, duration_s=3600.0)
+    dev = load_scenario(NOMINAL).device_nominal
+    sf = scale_factor_V_per_dps(build_diagram(dev, dev.reference_temperature_C))
+    f = Fitter(prepare(read_record(rec), sf), dev)
+    theta = {"q_drive_rel": 0.01, "split_Hz": -0.5}
+    eff = {"q_factor_drift": {"q_tc_per_K": -2e-3}}
+    a = f.table(theta, eff, quad=True)
+    b = f.table(dict(theta), {"q_factor_drift": dict(eff["q_factor_drift"])}, quad=True)
+    assert f.table_builds == 1
+    for x, y in ((a.base, b.base), (a.d_rate, b.d_rate), (a.d_quad, b.d_quad)):
+        assert np.array_equal(x, y) and x is not y
+    b.base[:] = 0.0                                                   # a caller's change stays its own
+    assert np.array_equal(f.table(theta, eff, quad=True).base, a.base)
+    c = f.table(dict(theta, split_Hz=-0.4), eff, quad=True)
+    d = f.table(theta, {"q_factor_drift": {"q_tc_per_K": -1e-3}}, quad=True)
+    assert f.table_builds == 3
+    direct = response_table(f.device(dict(theta, split_Hz=-0.4), eff), f.grid, with_rate=f.has_rate, with_quad=True)
+    assert np.array_equal(c.base, direct.base)
+    assert not np.array_equal(c.base, a.base) and not np.array_equal(d.base, a.base)
