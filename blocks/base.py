@@ -81,8 +81,9 @@ class LinearBlock(Block):
         The envelope face evaluates a block at many frequencies with the same parameters (a root
         search for the loop's oscillation frequency calls it dozens of times per steady state), and
         building a named ``StateSpace`` costs far more than the evaluation. The matrices are kept
-        with the parameter values they were built from and reused while those values are unchanged;
-        callers must not modify them.
+        with the parameter values they were built from and reused while those values compare equal
+        (parameters are numbers, strings or tuples of them, changed by assignment); callers must not
+        modify the arrays.
 
         Returns
         -------

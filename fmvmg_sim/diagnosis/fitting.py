@@ -192,12 +192,13 @@ class Fitter:
         eff = effects or {}
         rate = rate or self.has_rate
         # a fit often asks again for a table it built before (the nominal point of every effect without a
-        # device part, a retried fit's start): kept by the exact inputs, when they are all scalars (repr
-        # keeps every bit and the sign of zero; an array's repr may be abbreviated)
+        # device part, a retried fit's start): kept by the exact inputs when they are all Python numbers
+        # (their repr keeps every bit and the sign of zero). The knobs keep their order: apply_nominal applies
+        # them in it, and two of them do not commute (f_modes_rel scales the sense frequency, split_Hz adds).
         values = list(theta.values()) + [v for p in eff.values() for v in p.values()]
         key = None
-        if all(np.ndim(v) == 0 for v in values):
-            key = repr((sorted(theta.items()), sorted((n, sorted(p.items())) for n, p in eff.items()), quad, rate))
+        if all(type(v) in (float, int) for v in values):
+            key = repr((list(theta.items()), sorted((n, sorted(p.items())) for n, p in eff.items()), quad, rate))
         tab = self._tables.get(key) if key is not None else None
         if tab is None:
             self.table_builds += 1
