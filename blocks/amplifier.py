@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import LinearBlock, named_ss
+from .base import LinearBlock
 
 
 @dataclass
@@ -42,16 +42,18 @@ class DifferentialAmplifier(LinearBlock):
         """Bandwidth pole w_p = 2 pi GBW / |G| in rad/s."""
         return 2 * np.pi * self.gbw_Hz / max(abs(self.gain), 1.0)
 
-    def linear_model(self):
+    states = ("V",)
+
+    def abcd(self) -> tuple:
         """``x' = w_p (G u - x)``, ``y = x``.
 
         Returns
         -------
-        control.StateSpace
+        tuple
+            ``(A, B, C, D)``.
         """
         wp = self.pole_rad_s
-        return named_ss([[-wp]], [[wp * self.gain]], [[1.0]], [[0.0]], self.name,
-                        self.inputs, self.outputs, ("V",))
+        return [[-wp]], [[wp * self.gain]], [[1.0]], [[0.0]]
 
     def output_offset(self) -> np.ndarray:
         """The output offset in V.

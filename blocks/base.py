@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, fields
 from typing import ClassVar
 
@@ -46,6 +47,23 @@ class LinearBlock(Block):
     returns it from :meth:`output_offset`, added to its outputs by the engines.
     """
 
+    #: State names of the linear face, for a block that gives its matrices through :meth:`abcd`.
+    states: ClassVar[tuple] = ()
+
+    def abcd(self) -> tuple:
+        """The matrices ``A, B, C, D`` of the linear face (nested lists or arrays).
+
+        A block defines either this (with :attr:`states`; :meth:`linear_model` then names the signals) or
+        :meth:`linear_model` itself. Defining this lets :meth:`state_space_matrices` rebuild the matrices of
+        a block whose parameters change between calls without building a named ``StateSpace``.
+
+        Returns
+        -------
+        tuple
+            ``(A, B, C, D)``.
+        """
+        raise NotImplementedError
+
     def linear_model(self) -> control.StateSpace:
         """The continuous-time state-space model with named inputs, outputs and states.
 
@@ -53,7 +71,7 @@ class LinearBlock(Block):
         -------
         control.StateSpace
         """
-        raise NotImplementedError
+        return named_ss(*self.abcd(), self.name, self.inputs, self.outputs, self.states)
 
     def output_offset(self) -> np.ndarray:
         """Constant added to each output (V or the output's unit); zeros by default.
@@ -96,8 +114,12 @@ class LinearBlock(Block):
         key = tuple(map(self.__dict__.get, names))
         cached = self.__dict__.get("_state_space_cache")
         if cached is None or cached[0] != key:
-            sys = self.linear_model()
-            cached = (key, tuple(np.asarray(m, dtype=float) for m in (sys.A, sys.B, sys.C, sys.D)))
+            if type(self).abcd is not LinearBlock.abcd:  # the matrices without a named StateSpace
+                mats = shaped_matrices(*self.abcd(), len(self.states), len(self.inputs), len(self.outputs))
+            else:
+                sys = self.linear_model()
+                mats = (sys.A, sys.B, sys.C, sys.D)
+            cached = (key, tuple(np.asarray(m, dtype=float) for m in mats))
             self.__dict__["_state_space_cache"] = cached
         return cached[1]
 
@@ -118,7 +140,7 @@ class LinearBlock(Block):
         n = A.shape[0]
         if n == 0:
             return D.astype(complex)
-        return C @ np.linalg.solve(1j * omega_rad_s * np.eye(n) - A, B) + D
+        return C @ np.linalg.solve(1j * omega_rad_s * _eye(n) - A, B) + D
 
 
 def named_ss(A, B, C, D, name: str, inputs, outputs, states) -> control.StateSpace:
@@ -137,9 +159,35 @@ def named_ss(A, B, C, D, name: str, inputs, outputs, states) -> control.StateSpa
     -------
     control.StateSpace
     """
-    A = np.atleast_2d(np.asarray(A, dtype=float)).reshape(len(states), len(states))
-    B = np.asarray(B, dtype=float).reshape(len(states), len(inputs))
-    C = np.asarray(C, dtype=float).reshape(len(outputs), len(states))
-    D = np.asarray(D, dtype=float).reshape(len(outputs), len(inputs))
+    A, B, C, D = shaped_matrices(A, B, C, D, len(states), len(inputs), len(outputs))
     return control.ss(A, B, C, D, name=name, inputs=list(inputs), outputs=list(outputs),
                       states=list(states) if states else None)
+
+
+def shaped_matrices(A, B, C, D, n_states: int, n_inputs: int, n_outputs: int) -> tuple:
+    """``A, B, C, D`` as float arrays of the shapes a system with these signal counts has.
+
+    Parameters
+    ----------
+    A, B, C, D : array_like
+        State-space matrices.
+    n_states, n_inputs, n_outputs : int
+        Signal counts.
+
+    Returns
+    -------
+    tuple of ndarray
+    """
+    return (np.atleast_2d(np.asarray(A, dtype=float)).reshape(n_states, n_states),
+            np.asarray(B, dtype=float).reshape(n_states, n_inputs),
+            np.asarray(C, dtype=float).reshape(n_outputs, n_states),
+            np.asarray(D, dtype=float).reshape(n_outputs, n_inputs))
+
+
+@functools.lru_cache(maxsize=16)
+def _eye(n: int) -> np.ndarray:
+    """A read-only identity matrix of size ``n`` (the envelope face builds ``j w I - A`` many times)."""
+    eye = np.eye(n)
+    eye.flags.writeable = False
+    return eye
+

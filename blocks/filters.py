@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import LinearBlock, named_ss
+from .base import LinearBlock
 
 
 @dataclass
@@ -28,16 +28,18 @@ class LowPass1(LinearBlock):
     inputs = ("in",)
     outputs = ("out",)
 
-    def linear_model(self):
+    states = ("V",)
+
+    def abcd(self) -> tuple:
         """``x' = w_c (K u - x)``, ``y = x``.
 
         Returns
         -------
-        control.StateSpace
+        tuple
+            ``(A, B, C, D)``.
         """
         wc = 2 * np.pi * self.f_c_Hz
-        return named_ss([[-wc]], [[wc * self.gain]], [[1.0]], [[0.0]], self.name,
-                        self.inputs, self.outputs, ("V",))
+        return [[-wc]], [[wc * self.gain]], [[1.0]], [[0.0]]
 
 
 @dataclass
@@ -62,18 +64,20 @@ class LowPass2(LinearBlock):
     inputs = ("in",)
     outputs = ("out",)
 
-    def linear_model(self):
+    states = ("V", "dV")
+
+    def abcd(self) -> tuple:
         """Controllable canonical form with states (y, y'/w_c).
 
         Returns
         -------
-        control.StateSpace
+        tuple
+            ``(A, B, C, D)``.
         """
         wc = 2 * np.pi * self.f_c_Hz
         A = [[0.0, wc], [-wc, -wc / self.q]]
         B = [[0.0], [wc * self.gain]]
-        return named_ss(A, B, [[1.0, 0.0]], [[0.0]], self.name, self.inputs, self.outputs,
-                        ("V", "dV"))
+        return A, B, [[1.0, 0.0]], [[0.0]]
 
     def settling_time_s(self, tol: float = 0.02) -> float:
         """Approximate settling time ``-ln(tol) / (zeta w_c)`` (for tuning heuristics).

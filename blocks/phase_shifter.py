@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import LinearBlock, named_ss
+from .base import LinearBlock
 
 
 @dataclass
@@ -61,16 +61,18 @@ class AllPassPhaseShifter(LinearBlock):
         rc0 = np.tan(np.pi / 4 - trim_rad / 2) / (2 * np.pi * f_Hz)
         return cls(name=name, rc_s=rc0 * (1 + tc_rc_per_K * delta_T_K), gain=gain)
 
-    def linear_model(self):
+    states = ("V",)
+
+    def abcd(self) -> tuple:
         """``x' = (u - x)/RC``, ``y = K (u - 2x)``.
 
         Returns
         -------
-        control.StateSpace
+        tuple
+            ``(A, B, C, D)``.
         """
         a = 1.0 / self.rc_s
-        return named_ss([[-a]], [[a]], [[-2 * self.gain]], [[self.gain]], self.name,
-                        self.inputs, self.outputs, ("V",))
+        return [[-a]], [[a]], [[-2 * self.gain]], [[self.gain]]
 
     def phase_lead_rad(self, f_Hz: float) -> float:
         """Phase lead ``pi - 2 atan(2 pi f RC)`` at ``f_Hz``.

@@ -184,10 +184,17 @@ def ripple_feedback(dg: Diagram, omega: float, V_ps: complex) -> complex:
     return complex(-pi2 * H2 * R2)
 
 
-def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float):
-    """Complex AGC effort that holds a drive amplitude ``A`` at ``omega`` (real at the oscillation frequency)."""
-    Hx = dg.drive_chain_response(omega)
-    V_x, V_ps = Hx * A, Hx * dg.phase_shifter_response(omega) * A
+def _chain(dg: Diagram, omega: float) -> tuple:
+    """The drive chain's and the phase shifter's responses at ``omega`` (both :func:`_amplitude` and
+    :func:`_loop` need them at every frequency the root search tries)."""
+    return dg.drive_chain_response(omega), dg.phase_shifter_response(omega)
+
+
+def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float, chain: tuple | None = None):
+    """Complex AGC effort that holds a drive amplitude ``A`` at ``omega`` (real at the oscillation frequency);
+    ``chain`` is :func:`_chain` at ``omega`` when already evaluated."""
+    Hx, Hps = _chain(dg, omega) if chain is None else chain
+    V_x, V_ps = Hx * A, Hx * Hps * A
     carrier, R_I, R_Q = carrier_phasors(dg, V_x, V_ps)
     z1 = drive_response(dg, omega, rate_rad_s, dg.resonator.duffing_stiffness(A))
     F = A / z1[0]
@@ -197,9 +204,10 @@ def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float):
     return u, dict(V_x=V_x, V_ps=V_ps, carrier=carrier, R_I=R_I, R_Q=R_Q, z1=z1, F=F, V_ac=V_ac)
 
 
-def _amplitude(dg: Diagram, omega: float, vref: float) -> float:
+def _amplitude(dg: Diagram, omega: float, vref: float, chain: tuple | None = None) -> float:
     vps_amp = (vref - dg.rectifier.offset_V) / dg.rectifier.describing_gain()
-    return vps_amp / abs(dg.drive_chain_response(omega) * dg.phase_shifter_response(omega))
+    Hx, Hps = _chain(dg, omega) if chain is None else chain
+    return vps_amp / abs(Hx * Hps)
 
 
 def oscillation_frequency(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = None) -> float:
@@ -224,7 +232,8 @@ def oscillation_frequency(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | 
     span = max(20.0 / dg.resonator.q_drive, 1e-4)
 
     def imag_u(w):
-        return _loop(dg, w, _amplitude(dg, w, vref), rate_rad_s)[0].imag
+        chain = _chain(dg, w)
+        return _loop(dg, w, _amplitude(dg, w, vref, chain), rate_rad_s, chain)[0].imag
 
     return float(brentq(imag_u, w0 * (1 - span), w0 * (1 + span), xtol=1e-9, rtol=1e-15))
 
@@ -246,8 +255,9 @@ def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = No
     """
     vref = dg.vref_V if vref_V is None else vref_V
     w = oscillation_frequency(dg, rate_rad_s, vref)
-    A = _amplitude(dg, w, vref)
-    u, p = _loop(dg, w, A, rate_rad_s)
+    chain = _chain(dg, w)
+    A = _amplitude(dg, w, vref, chain)
+    u, p = _loop(dg, w, A, rate_rad_s, chain)
     X = complex(A)  # the phase reference is the drive displacement
     Y = p["z1"][2] * p["F"]
     V_ac = dg.modulator.k_per_V * (u.real * p["carrier"] + 0.5 * ripple_feedback(dg, w, p["V_ps"]) * np.conj(p["carrier"]))

@@ -1,5 +1,8 @@
 """Each block on its own: linear faces against python-control, carrier faces against brute force."""
 
+import copy
+import dataclasses
+
 import control
 import numpy as np
 import pytest
@@ -7,6 +10,7 @@ import pytest
 from blocks import (AllPassPhaseShifter, CapacitivePickoff, DifferentialAmplifier, ElectrostaticDrive,
                     FullWaveRectifier, LowPass1, LowPass2, Multiplier, PIController, SummingJunction,
                     TwoModeResonator)
+from blocks.base import LinearBlock
 from fmvmg_sim.carrier.discretize import expm_derivative, zoh
 
 LINEAR_BLOCKS = [
@@ -65,6 +69,23 @@ def test_frequency_response_follows_a_parameter_change():
     assert np.tan(-np.angle(after)) == pytest.approx(10 * np.tan(-np.angle(before)), rel=1e-12)
     amp.gbw_Hz = 20e6
     assert amp.frequency_response(w)[0, 0] == before
+
+
+@pytest.mark.parametrize("blk", LINEAR_BLOCKS, ids=lambda b: type(b).__name__)
+def test_cached_matrices_are_the_named_models(blk):
+    """The envelope face's matrices (built from ``abcd`` where a block has it) equal the named model's, bit for bit,
+    before and after a parameter changes, and the named model carries the block's state names."""
+    sys = blk.linear_model()
+    for got, ref in zip(blk.state_space_matrices(), (sys.A, sys.B, sys.C, sys.D)):
+        assert got.dtype == float and np.array_equal(got, np.asarray(ref, float))
+    if type(blk).abcd is not LinearBlock.abcd:
+        assert sys.state_labels == list(blk.states)
+        changed = copy.deepcopy(blk)
+        name = next(f.name for f in dataclasses.fields(changed) if isinstance(getattr(changed, f.name), float))
+        setattr(changed, name, 1.37 * getattr(changed, name))
+        sys2 = changed.linear_model()
+        for got, ref in zip(changed.state_space_matrices(), (sys2.A, sys2.B, sys2.C, sys2.D)):
+            assert np.array_equal(got, np.asarray(ref, float))
 
 
 def test_amplifier_gain_and_lag():

@@ -346,7 +346,7 @@ class Fitter:
         d = ds / scale
         x = lin.x0 + d
         cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
-        H0 = M.T @ M + P.T @ P
+        H0 = H  # M.T @ M + P.T @ P
         cov0 = scaled_inverse(H0)
         # the reported covariance: each channel's rows scaled by that channel's own reduced chi-square (when
         # above 1). One channel's misfit (the rate output's flicker wander, an unmodelled disturbance) then
