@@ -346,8 +346,7 @@ class Fitter:
         d = ds / scale
         x = lin.x0 + d
         cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
-        H0 = H  # M.T @ M + P.T @ P
-        cov0 = scaled_inverse(H0)
+        cov0 = scaled_inverse(H)  # H = M.T @ M + P.T @ P
         # the reported covariance: each channel's rows scaled by that channel's own reduced chi-square (when
         # above 1). One channel's misfit (the rate output's flicker wander, an unmodelled disturbance) then
         # widens the knobs that channel determines, not those a well-fitted channel pins
@@ -357,7 +356,7 @@ class Fitter:
         ssr = np.sum(np.where(ok, r0 - Aok @ d, 0.0) ** 2, axis=0)
         red_c = np.maximum(ssr / np.maximum(nc - K / max(int((nc > 0).sum()), 1), 1.0), 1.0)
         Mr = (Aok / np.sqrt(red_c)[None, :, None]).reshape(-1, K)
-        return Solution(x, scaled_inverse(Mr.T @ Mr + PtP), cost, n, _free_inverse(H0, cov0, ds, lo, hi))
+        return Solution(x, scaled_inverse(Mr.T @ Mr + PtP), cost, n, _free_inverse(H, cov0, ds, lo, hi))
 
     def set_score_floor(self, table: ResponseTable, die_b: np.ndarray, die_floor_K: float,
                         rel_floor: float = 0.0) -> None:
