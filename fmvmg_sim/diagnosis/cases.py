@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import json
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -52,6 +53,11 @@ SNR_TIERS = ((0.0, 3.0, "below"), (3.0, 10.0, "near"), (10.0, np.inf, "above"))
 OUT_OF_LIBRARY = ("bias_wander", "bias_step")
 #: Largest out-of-library amplitude (deg/s) a case may reach while aiming at its SNR.
 OOL_MAX_DPS = 2.0
+
+#: Response tables shared by the Fitters of the case being made (:func:`make_case`). Each SNR calibrates the
+#: nominal knobs afresh, from the data-sheet point, on records of one profile: the tables at that point and its
+#: finite-difference steps recur in every calibration (about 40 % of a case's cost, bit for bit the same).
+_CASE_TABLES: ContextVar[dict | None] = ContextVar("case_tables", default=None)
 
 
 class MixError(ValueError):
@@ -265,6 +271,16 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
     dict
         The label.
     """
+    token = _CASE_TABLES.set({})
+    try:
+        return _make_case(k, seed, out, scenario_path, duration_s, output_rate_Hz, mix)
+    finally:
+        _CASE_TABLES.reset(token)
+
+
+def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: float, output_rate_Hz: float,
+               mix: CaseMix | None) -> dict:
+    """:func:`make_case`'s work (its Fitters share their response tables)."""
     from ..effects import EffectSet
     from ..envelope.engine import run_envelope
     from ..scenario import load_scenario
@@ -439,7 +455,7 @@ def add_out_of_library(path: Path, ool: dict, target: float, device_nominal, noi
     rec = read_record(path, warn_unknown=False)
     cols = {c: np.array(v, dtype=float) for c, v in rec.columns.items()}
     sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
-    fit = Fitter(prepare(rec, sf), device_nominal)
+    fit = Fitter(prepare(rec, sf), device_nominal, tables=_CASE_TABLES.get())
     unit = out_of_library_shape(ool, cols["time_s"])
     z = fit.prep.block_mean(out_of_library_shape(ool, fit.prep.t_s) * sf) / fit.S[:, IRATE]
     rho, K, s_ = noise[IRATE]
@@ -539,7 +555,7 @@ def noise_model(record, device_nominal, theta: dict) -> list:
     from .fitting import Fitter
     from .likelihood import slow_state_fit
     sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
-    fit = Fitter(prepare(record, sf), device_nominal)
+    fit = Fitter(prepare(record, sf), device_nominal, tables=_CASE_TABLES.get())
     Z = fit.residual(fit.table(theta).evaluate(fit.path(None)["die_b"], fit.rate_b))
     out = []
     for c in range(Z.shape[1]):
@@ -567,7 +583,7 @@ def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict, train
     from .fitting import PATH_EFFECTS, Fitter
     rec = read_record(record_path, warn_unknown=False)
     sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
-    fit = Fitter(prepare(rec, sf), device_nominal)
+    fit = Fitter(prepare(rec, sf), device_nominal, tables=_CASE_TABLES.get())
     path = fit.path({n: v for n, v in det.items() if n in PATH_EFFECTS})
     truth = fit.table(theta, det, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
     truth[:, ~fit.present] = np.nan

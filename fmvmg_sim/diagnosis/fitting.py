@@ -129,9 +129,13 @@ class Fitter:
     prep : Prepared
     device : fmvmg_sim.device.Device
         The data-sheet (nominal) device.
+    tables : dict, optional
+        A store of response tables shared with other Fitters. A table depends only on the device, the
+        temperature grid and its inputs, so Fitters on records of one profile (several simulations of the same
+        oven and rate table) reuse each other's tables; the store keeps each device it holds tables of.
     """
 
-    def __init__(self, prep: Prepared, device):
+    def __init__(self, prep: Prepared, device, tables: dict | None = None):
         self.prep = prep
         self.device0 = device
         self.Y = prep.block_obs()
@@ -148,8 +152,9 @@ class Fitter:
         self._nom_jac = None
         self._nom_jac_theta = None
         self.table_builds = 0
-        #: Tables already built, by their exact inputs (:meth:`table`)
-        self._tables: dict = {}
+        #: Tables already built, by their exact inputs (:meth:`table`), for this device and grid
+        store = {} if tables is None else tables
+        self._tables: dict = store.setdefault((id(device), self.grid.tobytes()), (device, {}))[1]
         self._paths = {}
         #: Block sigma used to *score* models (model floor included); see :meth:`set_score_floor`.
         self.S_score = self.S
