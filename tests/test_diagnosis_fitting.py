@@ -46,7 +46,8 @@ def test_fitters_on_one_profile_share_a_table_store(tmp_path):
     sf = scale_factor_V_per_dps(build_diagram(dev, dev.reference_temperature_C))
     r1, _ = oven_record(tmp_path, "one", noise=False, duration_s=3600.0)
     r2, _ = oven_record(tmp_path, "two", {"q_factor_drift": {"q_tc_per_K": -2e-3}}, seed=2, duration_s=3600.0)
-    cold = "[temperature]\nstart_C = -20.0\nsegments = [ { hold_s = 600.0 }, { ramp_to_C = -10.0, rate_C_per_min = 0.5 } ]\n"
+    cold = ("[temperature]\nstart_C = -20.0\n"
+            "segments = [ { hold_s = 600.0 }, { ramp_to_C = -10.0, rate_C_per_min = 0.5 } ]\n")
     r3, _ = oven_record(tmp_path, "cold", noise=False, duration_s=3600.0, profile=cold)
     store = {}
     theta = {"q_drive_rel": 0.01}

@@ -56,7 +56,7 @@ OOL_MAX_DPS = 2.0
 
 #: Response tables shared by the Fitters of the case being made (:func:`make_case`). Each SNR calibrates the
 #: nominal knobs afresh, from the data-sheet point, on records of one profile: the tables at that point and its
-#: finite-difference steps recur in every calibration (about 40 % of a case's cost, bit for bit the same).
+#: finite-difference steps recur in every calibration (about a third of a case's CPU, bit for bit the same).
 _CASE_TABLES: ContextVar[dict | None] = ContextVar("case_tables", default=None)
 
 
