@@ -38,6 +38,9 @@ the scorer after every diagnosis has returned. Scores (measured, never tuned to 
   and the forward-chained protocol allow (:func:`ceilings`, :data:`IMPOSSIBLE_CAUSES`): an upper bound on what any
   diagnosis could reach on these cases under that protocol, so that a target beyond it is seen to be out of reach of
   the diagnosis rather than missed by it;
+* ``detection_claim``: whether the reports' detection limits hold (:func:`detection_claim`): single effects at or
+  above their report's limit for the true effect (``mde_ratio`` >= 1 in the rows), found (accepted or in an
+  ambiguity set) and top-2, against those below it, and by :data:`MDE_BANDS`;
 * ``ci95``: the 95 % Wilson score interval of each rate above that is a proportion of counted cases
   (:data:`INTERVALS`, :func:`wilson_interval`), so that a rate over a few dozen cases is read with its
   uncertainty and a target can be seen to be met, missed, or not yet decided.
@@ -72,7 +75,8 @@ def _diagnose_case(record: str, scenario: str, n_null: int, out_dir: str) -> dic
             "rows": {r["effect"]: {"params": r.get("params"), "shrink": r.get("shrink"), "accepted": r["accepted"],
                                    "folds_testable": r.get("folds_testable"), "why_not": r.get("why_not")}
                      for r in cj["ranked"]},
-            "combined": cj.get("combined"), "design": cj.get("design"), "wall_time_s": cj["wall_time_s"]}
+            "combined": cj.get("combined"), "design": cj.get("design"),
+            "detection_limits": cj.get("detection_limits"), "wall_time_s": cj["wall_time_s"]}
 
 
 def _make(k, seed, out, scenario, duration_s, rate_Hz, mix=None):
@@ -400,6 +404,10 @@ def score(labels: list[dict], results: list[dict]) -> dict:
             r["top1"] = bool(claimed and ranked[:1] == [t] and acc[:1] == [t])
             r["top2"] = bool(claimed and t in ranked[:2] and t in (set(acc) | amb))
             r["in_set"] = bool(t in acc or t in amb)
+            ratio = None if err else size_ratio(t, lab["effects"][t], res.get("detection_limits"))
+            if ratio is not None:
+                r["mde_ratio"] = ratio
+                r["mde_power"] = (res.get("detection_limits") or {}).get("power")
         else:
             r["pair_exact"] = bool(sorted(acc) == truth)
             r["pair_one"] = bool(set(acc) & set(truth))
@@ -507,8 +515,74 @@ def score(labels: list[dict], results: list[dict]) -> dict:
     # rates are means of booleans: the count is the rate times its number of cases
     out["ci95"] = {k: (wilson_interval(round(out[k] * out[n]), out[n]) if out.get(k) is not None else None)
                    for k, n in INTERVALS}
+    out["detection_claim"] = detection_claim(rows)
     out["rows"] = rows
     return out
+
+
+def size_ratio(effect: str, truth: dict, limits: dict | None) -> float | None:
+    """How far a true effect lies above its report's detection limit: the largest ``|value| / limit`` over its
+    parameters with a limit.
+
+    Parameters
+    ----------
+    effect : str
+    truth : dict
+        ``{param: value}`` (the label's).
+    limits : dict or None
+        The report's ``detection_limits`` (``{"power", "effects": {effect: {"params": {param: limit or None}}}}``).
+
+    Returns
+    -------
+    float or None
+        0 when every limit lies beyond the search range (nothing detectable); None when the effect has none (a
+        noise-level effect, or a report without limits).
+    """
+    lim = (((limits or {}).get("effects") or {}).get(effect) or {}).get("params") or {}
+    lim = {p: v for p, v in lim.items() if p in truth}
+    if not lim:
+        return None
+    r = [abs(float(truth[p])) / v for p, v in lim.items() if v]
+    return float(max(r)) if r else 0.0
+
+
+#: Bands of a true single effect's size over its report's detection limit (``mde_ratio``).
+MDE_BANDS = ((0.0, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, np.inf))
+
+
+def detection_claim(rows: list[dict]) -> dict | None:
+    """How the reports' detection limits (:mod:`.detection`) hold: single effects by their size over the limit.
+
+    A report states, for each deterministic effect, the size it would attribute with probability
+    :data:`.detection.POWER`. Over the single-effect cases whose truth is at or above that size (``mde_ratio`` >= 1),
+    the truth should be found (accepted or in an ambiguity set) in at least that share; below it, less often.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Case rows of :func:`score` (those without ``mde_ratio`` are not counted: noise-level effects, failed
+        diagnoses, reports without limits).
+
+    Returns
+    -------
+    dict or None
+        ``above`` and ``below`` (``cases``, ``found``, ``top2``, ``found_ci95``, ``top2_ci95``) and ``bands``
+        (the same per :data:`MDE_BANDS`); None when no row has a ratio.
+    """
+    v = [r for r in rows if r.get("mde_ratio") is not None and len(r["truth"]) == 1]
+    if not v:
+        return None
+
+    def part(sel):
+        s = [r for r in v if sel(r)]
+        k_f, k_2 = sum(bool(r["in_set"]) for r in s), sum(bool(r["top2"]) for r in s)
+        return {"cases": len(s), "found": k_f, "top2": k_2, "found_ci95": wilson_interval(k_f, len(s)),
+                "top2_ci95": wilson_interval(k_2, len(s))}
+    powers = sorted({r["mde_power"] for r in v if r.get("mde_power") is not None})
+    return {"power": powers[0] if len(powers) == 1 else powers, "above": part(lambda r: r["mde_ratio"] >= 1.0),
+            "below": part(lambda r: r["mde_ratio"] < 1.0),
+            "bands": [dict(part(lambda r, lo=lo, hi=hi: lo <= r["mde_ratio"] < hi), ratio_min=lo,
+                           ratio_max=None if not np.isfinite(hi) else hi) for lo, hi in MDE_BANDS]}
 
 
 def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: str | None = None,

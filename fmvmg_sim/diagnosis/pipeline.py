@@ -22,6 +22,7 @@ from .attribute import (FOLDS_REASON, INDETERMINATE_SD, MIN_TRAIN_SPAN_K, TEMPER
                         attribute, in_sample, located_gap_candidate, pairs_from_scratch, rejudge_second,
                         separating_experiment)
 from .calibrate import calibrate
+from .detection import POWER, detection_limits
 from .converter import Converter, lattice_noise, staircase_visible
 from .data import CONVERTER_CHANNELS, ON_LATTICE_MIN, Prepared, difference_sigma, lattice_lsb, prepare
 from .fitting import Fitter
@@ -402,6 +403,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     # 3. attribution (deterministic effects), scored with the null's noise model
     scorer = Scorer(fitter, cal, noise_params)
     att = attribute(scorer, progress=show)
+    # what this record could not have shown: each effect's smallest size attributed with probability POWER
+    limits = detection_limits(scorer)
     noise_ms = {k: float(np.mean([m[k] for m in null_ms if k in m])) for k in null_ms[0]} if null_ms else {}
     localization = loc.compare(st_meas, st_null)
     sig = loc.significant(localization)
@@ -581,12 +584,15 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         window_stats(prep, fitter.residual(final_pred_tr), win), null_win,
         float(prep.block_time_s()[train].max()) - float(prep.t_s[0]) if train.any() else 0.0)
     for r in ranked:
+        if r["effect"] in limits:
+            r["detectable_from"] = limits[r["effect"]]["params"]
         if not r["accepted"] and r["effect"] in design["not_identifiable"]:
             r["why_not"] = ["not identifiable here: no training window leaves one temperature"] + r["why_not"]
     report = {
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
         "closure": closure, "in_sample_candidates": hint, "design": design,
+        "detection_limits": {"power": POWER, "effects": limits},
         "replaced_partial": att.get("replaced_partial"), "replaced_first": att.get("replaced_first"),
         "located_gap": att.get("located_gap"),
         "primary_metric": primary, "combined": combined,

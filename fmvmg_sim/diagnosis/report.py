@@ -6,6 +6,7 @@ import json
 import math
 from pathlib import Path
 
+from ..effects import MODELS
 from ..record import atomic_write_text
 from . import localize as loc
 
@@ -103,6 +104,51 @@ def in_sample_lines(hint: dict | None) -> list[str]:
     if not hint.get("candidates"):
         L.append("- none: no library effect closes the gap in-sample either.")
     return L + [""]
+
+
+def detection_lines(det: dict | None, verdict: str, accepted: list) -> list[str]:
+    """The detection limits as a table: what this record would have attributed, and what could hide in it.
+
+    Parameters
+    ----------
+    det : dict or None
+        The report's ``detection_limits`` (:func:`.detection.detection_limits` with its ``power``).
+    verdict : str
+    accepted : list of str
+
+    Returns
+    -------
+    list of str
+        Markdown lines; none without limits.
+    """
+    if not det or not det.get("effects"):
+        return []
+    pw = det.get("power")
+    lead = ("Nothing was attributed: an effect of the sizes below or larger would have been, with probability "
+            f"{pw:g}; smaller ones can hide in this record." if not accepted else
+            f"The size at which each effect would be attributed on this record, with probability {pw:g}.")
+    L = ["", "### Detection limits (from the record's design, not from any fit)", "", lead, "",
+         "| effect | smallest size attributed | at |", "|---|---|---|"]
+    for name, d in det["effects"].items():
+        if d.get("error"):
+            L.append(f"| {name} | not computed ({d['error']}) | |")
+            continue
+        parts = []
+        for p, v in (d.get("params") or {}).items():
+            spec = MODELS[name][p]
+            unit = "" if spec.unit == "1" else f" {spec.unit}"
+            if v is None or p in d.get("beyond_bound", []):
+                parts.append(f"{p}: not detectable here (beyond its physical bound)")
+            elif 0 < spec.lo and v < spec.lo:
+                parts.append(f"{p}: any value within its bounds (limit {_fmt(v, '.3g')}{unit}, below {spec.lo:g})")
+            else:
+                parts.append(f"{p}: {_fmt(v, '.3g')}{unit}" + (" (either sign)" if spec.signed else ""))
+        at = ", ".join(f"{k} = {_fmt(v, '.3g')}" for k, v in (d.get("at") or {}).items())
+        L.append(f"| {name} | {'; '.join(parts)} | {at} |")
+    L += ["", "Each parameter alone, the effect's other parameters and the nominal knobs refitted beside it; the "
+          "criteria's pass probabilities are multiplied as if independent, so a limit errs large. Noise-level effects "
+          "(extra flicker, a coarser converter) are judged by their Allan band and the output lattice instead."]
+    return L
 
 
 def markdown(rep: dict) -> str:
@@ -209,6 +255,7 @@ def markdown(rep: dict) -> str:
               + ". With every knob free its fit was refused at a physical bound; the record does not identify these "
               "knobs (calibration table), so the effect's amplitude can trade against them, and it was fitted again "
               "with them held at their calibrated values."]
+    L += detection_lines(rep.get("detection_limits"), rep["verdict"], rep["accepted"])
     c = rep.get("combined")
     if c:
         L += ["", f"## 4. Gap before and after ({' + '.join(c['effects'])}), held-out data", "",
