@@ -1,5 +1,7 @@
 """The benchmark's readable summary: targets against measured values, counts, tiers and misses by cause."""
 
+import pytest
+
 from fmvmg_sim.diagnosis.benchmark import score
 from fmvmg_sim.diagnosis.benchmark_report import format_scores
 
@@ -100,3 +102,19 @@ def test_summary_counts_where_the_record_design_note_fired():
     assert row["null cases"] == ["0 of 1"]
     # results from before the note (no "gap_after_training") leave the table out
     assert "| null cases |" not in format_scores(score(labs, [_res("none")] * 4))
+
+
+def test_summary_reads_the_detection_claim():
+    """Single effects against their report's detection limit: the claim's row and the bands."""
+    lim = {"power": 0.9, "effects": {"duffing": {"params": {"k3_rel": 1e-4}}}}
+    labs = [{"case": k, "effects": {"duffing": {"k3_rel": v}}, "tier": "above", "snr": 20.0}
+            for k, v in enumerate((3e-4, 1.5e-4, 2e-5))]
+    results = [dict(_res("explained", ["duffing"]), detection_limits=lim),
+               dict(_res("none"), detection_limits=lim), dict(_res("none"), detection_limits=lim)]
+    sc = score(labs, results)
+    assert [r["mde_ratio"] for r in sc["rows"]] == pytest.approx([3.0, 1.5, 0.2])
+    rows = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]]
+            for ln in format_scores(sc).splitlines() if ln.startswith("| ")}
+    assert rows[">= 1 (the claim)"] == ["2", "0.500 (0.095-0.905)", "0.500 (0.095-0.905)"]
+    assert rows["< 1"][:2] == ["1", "0.000 (0.000-0.793)"]
+    assert rows["2-5"][0] == "1" and rows["1-2"][0] == "1" and "0.5-1" not in rows

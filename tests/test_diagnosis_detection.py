@@ -13,9 +13,9 @@ THETA = {"q_sense_rel": 0.1, "quadrature_rel": -0.08, "demod_phase_mrad": 1.0, "
          "q_drive_rel": -0.1}
 
 
-def _pw(a, folds=((20.0, 1e6), (20.0, 1e6), (20.0, 1e6)), need=2, F=400.0, I=30.0):
+def _pw(a, folds=((20.0, 1e6), (20.0, 1e6), (20.0, 1e6)), need=2, F=400.0, nats_train=30.0):
     """A linear signature of amplitude ``a``: (nats per unit a^2, training information) per fold."""
-    return pass_rate(a * np.sqrt(F), I * a * a, 1, 4000, [(i * a * a, i / F_k) for i, F_k in folds], need)
+    return pass_rate(a * np.sqrt(F), nats_train * a * a, 1, 4000, [(i * a * a, i / F_k) for i, F_k in folds], need)
 
 
 def test_power_rises_from_zero_to_one_with_the_amplitude():
@@ -55,7 +55,8 @@ def test_fold_criterion_alone_matches_its_gaussian_pass_rate():
 def test_size_ratio_reads_the_reports_limits():
     lim = {"power": 0.9, "effects": {"reference_drift": {"params": {"vref_tc_per_K": 1e-8, "rectifier_mV_per_K": 1e-4}},
                                      "duffing": {"params": {"k3_rel": None}}}}
-    assert size_ratio("reference_drift", {"vref_tc_per_K": -3e-8, "rectifier_mV_per_K": 5e-5}, lim) == pytest.approx(3.0)
+    truth = {"vref_tc_per_K": -3e-8, "rectifier_mV_per_K": 5e-5}
+    assert size_ratio("reference_drift", truth, lim) == pytest.approx(3.0)
     assert size_ratio("duffing", {"k3_rel": 1e-4}, lim) == 0.0          # no limit within reach: not detectable
     assert size_ratio("flicker_noise", {"h_output_dps2": 1e-5}, lim) is None
     rows = [{"truth": ["duffing"], "mde_ratio": r, "mde_power": 0.9, "in_set": f, "top2": f}

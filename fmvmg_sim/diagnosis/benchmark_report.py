@@ -139,13 +139,13 @@ def format_scores(sc: dict) -> str:
                 L.append(f"| {label} | {d['fired']} of {d['cases']} |")
     dc = sc.get("detection_claim") or {}
     if dc.get("bands"):
-        L += ["", f"Do the reports' detection limits hold? Each report gives, per effect, the size it would attribute with "
-              f"probability {dc['power']:g}; single effects by their true size over their report's limit (found: "
+        L += ["", "Do the reports' detection limits hold? Each report gives, per effect, the size it would attribute "
+              f"with probability {dc['power']}; single effects by their true size over their report's limit (found: "
               "accepted or in an ambiguity set; 95 % intervals):", "",
               "| size / limit | cases | found | top-2 |", "|---|---|---|---|"]
-        for lab, d in ([(">= 1 (the claim)", dc["above"]), ("< 1", dc["below"])]
-                       + [(f">= {b['ratio_min']:g}" if b["ratio_max"] is None else f"{b['ratio_min']:g}-{b['ratio_max']:g}", b)
-                          for b in dc["bands"]]):
+        bands = [(f">= {b['ratio_min']:g}" if b["ratio_max"] is None else f"{b['ratio_min']:g}-{b['ratio_max']:g}", b)
+                 for b in dc["bands"]]
+        for lab, d in [(">= 1 (the claim)", dc["above"]), ("< 1", dc["below"])] + bands:
             if d["cases"]:
                 L.append(f"| {lab} | {d['cases']} | {d['found'] / d['cases']:.3f} ({_interval(d['found_ci95'])}) | "
                          f"{d['top2'] / d['cases']:.3f} ({_interval(d['top2_ci95'])}) |")
