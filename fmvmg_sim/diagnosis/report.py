@@ -127,7 +127,8 @@ def detection_lines(det: dict | None, verdict: str, accepted: list) -> list[str]
     lead = ("Nothing was attributed: an effect of the sizes below or larger would have been, with probability "
             f"{pw:g}; smaller ones can hide in this record." if not accepted else
             f"The size at which each effect would be attributed on this record, with probability {pw:g}.")
-    L = ["", "### Detection limits (from the record's design, not from any fit)", "", lead, "",
+    L = ["", "### Detection limits (from the record's design and the calibrated unit, not from a fit of the effect)", "",
+         lead, "",
          "| effect | smallest size attributed | at |", "|---|---|---|"]
     for name, d in det["effects"].items():
         if d.get("error"):
@@ -145,8 +146,9 @@ def detection_lines(det: dict | None, verdict: str, accepted: list) -> list[str]
                 parts.append(f"{p}: {_fmt(v, '.3g')}{unit}" + (" (either sign)" if spec.signed else ""))
         at = ", ".join(f"{k} = {_fmt(v, '.3g')}" for k, v in (d.get("at") or {}).items())
         L.append(f"| {name} | {'; '.join(parts)} | {at} |")
-    L += ["", "Each parameter alone, the effect's other parameters and the nominal knobs refitted beside it; the "
-          "criteria's pass probabilities are multiplied as if independent, so a limit errs large. Noise-level effects "
+    L += ["", "Each parameter alone, at the calibrated unit: the nominal knobs (within their tolerance bounds) and the "
+          "effect's other parameters refit beside it on each fold's training window, and the acceptance criteria are "
+          "simulated on what they leave (a signed parameter: the larger limit of its two signs). Noise-level effects "
           "(extra flicker, a coarser converter) are judged by their Allan band and the output lattice instead."]
     return L
 
