@@ -87,7 +87,7 @@ Z_CI = float(norm.ppf(0.975))
 
 class _Refit:
     """The nominal knobs (and the effect's other parameters) refitted within their bounds on one training window,
-    beside an amplitude ``a`` of one effect column: what they absorb of it, and what is left.
+    beside an amplitude ``a`` of one effect column: what they absorb of it, and the nats of what is left.
 
     The refit is :meth:`.fitting.Fitter.solve`'s (weighted least squares with the knobs' priors, bounded), on the
     calibrated prediction plus ``a`` times the column; its normal matrix is built once, so each amplitude costs a
@@ -105,20 +105,23 @@ class _Refit:
         The training window.
     base : ndarray, shape (n, C)
         The calibrated prediction.
+    out_rows : ndarray of bool
+        The blocks whose nats are read (the fold's scored blocks, or the training window).
+    par : list
+        The noise model the nats are read under (:func:`.likelihood.expected_gain`).
     """
 
-    def __init__(self, lin, j: int, fitter, rows: np.ndarray, base: np.ndarray):
+    def __init__(self, lin, j: int, fitter, rows: np.ndarray, base: np.ndarray, out_rows: np.ndarray, par: list):
         K = len(lin.names)
-        self.j = j
+        self.j, self.par = j, par
         self.o = np.array([i for i in range(K) if i != j], int)
-        self.cols = np.nan_to_num(lin.cols)
-        self.u = self.cols[:, :, j]
+        cols = np.nan_to_num(lin.cols)
         W = 1.0 / fitter.S[rows]
         ok = np.isfinite(fitter.Y[rows]) & fitter.present[None, :] & np.isfinite(W)
         W = np.nan_to_num(W)
-        M = (self.cols[rows] * W[:, :, None])[ok]
+        M = (cols[rows] * W[:, :, None])[ok]
         b0 = ((base - lin.y0)[rows] * W)[ok]
-        bu = (self.u[rows] * W)[ok]
+        bu = (cols[rows][:, :, j] * W)[ok]
         prec = np.where(np.isfinite(lin.prior_sd), 1.0 / np.where(np.isfinite(lin.prior_sd), lin.prior_sd, 1.0) ** 2,
                         0.0)
         pb = np.where(np.isfinite(lin.prior_sd), -lin.x0, 0.0) * prec
@@ -127,8 +130,13 @@ class _Refit:
         self.H = self.Hfull[np.ix_(self.o, self.o)]
         self.g0 = Mo.T @ b0 + pb[self.o]
         self.gu = Mo.T @ bu
-        self.lo, self.hi, self.x0 = lin.lo[self.o] - lin.x0[self.o], lin.hi[self.o] - lin.x0[self.o], lin.x0[self.o]
+        self.lo, self.hi = lin.lo[self.o] - lin.x0[self.o], lin.hi[self.o] - lin.x0[self.o]
         self.d0, _ = self._solve(0.0)
+        # the blocks read, normalised by the scoring sigma (zero where a channel or block has no data)
+        wz = np.where(np.isfinite(fitter.Y[out_rows]) & fitter.present[None, :],
+                      1.0 / fitter.S_score[out_rows], 0.0)
+        self.uz = cols[out_rows][:, :, j] * wz
+        self.Oz = cols[out_rows][:, :, self.o] * wz[:, :, None]
 
     def _solve(self, a: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounded solution (deviation from the linearisation point) and the mask of parameters at a bound."""
@@ -144,9 +152,9 @@ class _Refit:
         active = (ds <= lo + 1e-9 * np.maximum(1.0, np.abs(lo))) | (ds >= hi - 1e-9 * np.maximum(1.0, np.abs(hi)))
         return ds / sc, active
 
-    def at(self, a: float) -> tuple[np.ndarray, float]:
-        """What is left of amplitude ``a`` after the refit, on every block, and the amplitude's Fisher information
-        with the parameters at a bound held (as :attr:`.fitting.Solution.cov_noise` holds them).
+    def at(self, a: float) -> tuple[float, float]:
+        """Nats of what is left of amplitude ``a`` after the refit, and the amplitude's Fisher information with the
+        parameters at a bound held (as :attr:`.fitting.Solution.cov_noise` holds them).
 
         Parameters
         ----------
@@ -154,11 +162,13 @@ class _Refit:
 
         Returns
         -------
-        left : ndarray, shape (n, C)
+        nats : float
+            On the blocks read, under the noise model.
         F : float
+            On the training window, under the fitting weights.
         """
         d, active = self._solve(a)
-        left = a * self.u - self.cols[:, :, self.o] @ (d - self.d0)
+        nats = expected_gain(a * self.uz - self.Oz @ (d - self.d0), self.par)
         free = self.o[~active]
         Hoo = self.Hfull[np.ix_(free, free)]
         h = self.Hfull[free, self.j]
@@ -166,14 +176,7 @@ class _Refit:
         if len(free):
             sc = np.sqrt(np.clip(np.diag(Hoo), 1e-300, None))
             F -= float((h / sc) @ np.linalg.solve(Hoo / np.outer(sc, sc) + 1e-12 * np.eye(len(sc)), h / sc))
-        return left, max(F, 0.0)
-
-
-def _nats(left: np.ndarray, fitter, rows: np.ndarray, par: list) -> float:
-    """Nats the signature ``left`` carries on ``rows`` under the noise model ``par`` (scoring sigma)."""
-    dZ = left[rows] / fitter.S_score[rows]
-    dZ = np.where(np.isfinite(fitter.Y[rows]) & fitter.present[None, :], dZ, 0.0)
-    return expected_gain(dZ, par)
+        return nats, max(F, 0.0)
 
 
 def _draws(n_folds: int, k: int, n: int = None) -> dict:
@@ -320,20 +323,19 @@ def effect_limits(scorer: Scorer, name: str) -> dict:
     k = len(MODELS[name])
     out, beyond = {}, []
     for p, j in targets.items():
-        refit_tr = _Refit(lin, j, f, scorer.train, base)
-        refit_k = [(_Refit(lin, j, f, fd["train"], base), fd["scored"]) for fd in scorer.folds]
+        refit_tr = _Refit(lin, j, f, scorer.train, base, scorer.train, par)
+        refit_k = [_Refit(lin, j, f, fd["train"], base, fd["scored"], par) for fd in scorer.folds]
         draws = _draws(len(refit_k), k)
 
         def pw(a, refit_tr=refit_tr, refit_k=refit_k, draws=draws):
             # a signed amplitude; its Fisher information and nats do not depend on the sign but through the bounds
-            left, F = refit_tr.at(a)
+            nats_tr, F = refit_tr.at(a)
             folds = []
-            for rf, scored in refit_k:
-                left_k, F_k = rf.at(a)
-                I_k = _nats(left_k, f, scored, par)
-                folds.append((I_k, I_k / (a * a * F_k) if F_k > 0 else np.inf))
+            for rf in refit_k:
+                nats_k, F_k = rf.at(a)
+                folds.append((nats_k, nats_k / (a * a * F_k) if F_k > 0 else np.inf))
             z = None if name == "thermal_lag" else abs(a) * np.sqrt(F)
-            return pass_rate(z, _nats(left, f, scorer.train, par), k, n_rows, folds, scorer.folds_needed, draws)
+            return pass_rate(z, nats_tr, k, n_rows, folds, scorer.folds_needed, draws)
         spec = MODELS[name][p]
         hi = max(abs(spec.lo), abs(spec.hi))
         # either sign of a signed parameter: the knobs may have room to absorb one and not the other; the limit is
