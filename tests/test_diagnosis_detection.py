@@ -7,6 +7,8 @@ from fmvmg_sim.diagnosis.benchmark import detection_claim, size_ratio
 from fmvmg_sim.diagnosis.detection import POWER, pass_rate
 from fmvmg_sim.diagnosis.pipeline import diagnose
 from fmvmg_sim.diagnosis.report import detection_lines
+from fmvmg_sim.effects import MODELS
+from fmvmg_sim.record import read_record, write_record
 from tests.test_diagnosis_helpers import NOMINAL, oven_record
 
 THETA = {"q_sense_rel": 0.1, "quadrature_rel": -0.08, "demod_phase_mrad": 1.0, "f_modes_rel": 0.002,
@@ -101,3 +103,25 @@ def test_an_effect_above_its_limit_is_attributed_and_one_well_below_is_not(phase
     assert ("demod_phase_drift" in named) is found, (rep["verdict"], rep["accepted"], rep["ambiguous_with"])
     k1 = rep["detection_limits"]["effects"]["demod_phase_drift"]["params"]["kappa_urad_per_K"]
     assert k1 == pytest.approx(k0, rel=0.25)
+
+
+def test_without_the_auxiliary_channels_the_limits_rise(phase_limit):
+    """The limit is the record's design: the same record with only the rate output (no quadrature, drive amplitude,
+    AGC effort or drive frequency) loses the drive frequency, the die's own thermometer, and the AGC effort, where a Q
+    drift shows. A lag must then be long enough to show in the rate output, and the report says which limits lie
+    beyond their physical bounds."""
+    lim, tmp = phase_limit
+    r = read_record(tmp / "null.csv")
+    keep = {k: v for k, v in r.columns.items() if k in ("time_s", "temperature_C", "rate_dps", "rate_V")}
+    write_record(tmp / "rate_only.csv", type(r)(keep, r.metadata))
+    rep = diagnose(tmp / "rate_only.csv", NOMINAL, n_null=2, progress=False, log=lambda m: None)
+    assert rep["record"]["channels"] == ["rate_V"]
+    bare = rep["detection_limits"]["effects"]
+    full = lim["effects"]
+    assert bare["thermal_lag"]["params"]["tau_s"] > 100 * full["thermal_lag"]["params"]["tau_s"]
+    assert bare["q_factor_drift"]["params"]["q_tc_per_K"] > 100 * full["q_factor_drift"]["params"]["q_tc_per_K"]
+    for name, d in bare.items():
+        for p, v in d["params"].items():
+            bound = max(abs(MODELS[name][p].lo), abs(MODELS[name][p].hi))
+            assert (p in d["beyond_bound"]) == (v is None or v > bound), (name, p, v)
+    assert any(d["beyond_bound"] for d in bare.values())
