@@ -592,7 +592,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         "verdict": verdict, "accepted": accepted, "ambiguous_with": amb, "ranked": ranked,
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
         "closure": closure, "in_sample_candidates": hint, "design": design,
-        "detection_limits": {"power": POWER, "effects": limits},
+        "detection_limits": {"power": POWER, "effects": limits, "knobs_at_bound": list(cal.at_bound)},
         "replaced_partial": att.get("replaced_partial"), "replaced_first": att.get("replaced_first"),
         "located_gap": att.get("located_gap"),
         "primary_metric": primary, "combined": combined,

@@ -146,6 +146,11 @@ def detection_lines(det: dict | None, verdict: str, accepted: list) -> list[str]
                 parts.append(f"{p}: {_fmt(v, '.3g')}{unit}" + (" (either sign)" if spec.signed else ""))
         at = ", ".join(f"{k} = {_fmt(v, '.3g')}" for k, v in (d.get("at") or {}).items())
         L.append(f"| {name} | {'; '.join(parts)} | {at} |")
+    if det.get("knobs_at_bound"):
+        L += ["", f"The calibration holds {', '.join(det['knobs_at_bound'])} at the unit's tolerance bound: a knob there "
+              "absorbs no more in one direction, so the limit of an effect that knob mimics can be optimistic (a "
+              "feedthrough beside the demodulation phase and sense gain at their bounds was missed at 22 times its "
+              "limit, its signature SNR 1.5; session 46)."]
     L += ["", "Each parameter alone, at the calibrated unit: the nominal knobs (within their tolerance bounds) and the "
           "effect's other parameters refit beside it on each fold's training window, and the acceptance criteria are "
           "simulated on what they leave (a signed parameter: the larger limit of its two signs). Noise-level effects "
