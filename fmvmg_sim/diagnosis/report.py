@@ -146,7 +146,8 @@ def detection_lines(det: dict | None, verdict: str, accepted: list) -> list[str]
                 parts.append(f"{p}: {_fmt(v, '.3g')}{unit}" + (" (either sign)" if spec.signed else ""))
         at = ", ".join(f"{k} = {_fmt(v, '.3g')}" for k, v in (d.get("at") or {}).items())
         L.append(f"| {name} | {'; '.join(parts)} | {at} |")
-    if det.get("knobs_at_bound"):
+    if det.get("knobs_at_bound") and not accepted:
+        # (beside an accepted effect a knob at its bound is the effect's doing; here it bears on what could hide)
         L += ["", f"The calibration holds {', '.join(det['knobs_at_bound'])} at the unit's tolerance bound: a knob there "
               "absorbs no more in one direction, so the limit of an effect that knob mimics can be optimistic (a "
               "feedthrough beside the demodulation phase and sense gain at their bounds was missed at 22 times its "
