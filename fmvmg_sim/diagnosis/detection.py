@@ -34,7 +34,8 @@ folds), never from a fit of the effect. Method, one amplitude at a time:
   - the pooled held-out interval excludes zero.
 
   The limit is where the pass rate reaches :data:`POWER` (bisection on the logarithm of ``a``), the larger of the
-  two signs for a signed parameter (the knobs may have room for one and not the other). Beyond 100 times the
+  two signs of the column (the knobs may have room for one and not the other, and a calibration that absorbed part
+  of an effect already holds a knob at its bound on that effect's side). Beyond 100 times the
   effect's physical bound it is reported as not detectable. The bounds criterion and the look-alike rules are not
   simulated, and the gains are read under the noise model, not through a coarse converter's staircase.
 
@@ -338,9 +339,12 @@ def effect_limits(scorer: Scorer, name: str) -> dict:
             return pass_rate(z, nats_tr, k, n_rows, folds, scorer.folds_needed, draws)
         spec = MODELS[name][p]
         hi = max(abs(spec.lo), abs(spec.hi))
-        # either sign of a signed parameter: the knobs may have room to absorb one and not the other; the limit is
-        # the larger (an effect of either sign at or above it)
-        signs = (1.0, -1.0) if spec.signed else (1.0,)
+        # both signs, the larger limit: the knobs may have room to absorb one and not the other. For a signed
+        # parameter that is an effect of either sign; for one that cannot change sign (a feedthrough capacitance) the
+        # mirrored column stands in for the knobs' room on their other side. A calibration that has already absorbed
+        # part of an effect holds a knob at its bound on the effect's side, and the physical sign alone then reads
+        # a limit far too small (feedthroughs of signature SNR 0.3-1.5 missed at 1.3-22 times it, 90550-90551)
+        signs = (1.0, -1.0)
         lims = [_solve_mde(lambda a, sg=sg: pw(sg * a), hi) for sg in signs]
         mde = None if any(v is None for v in lims) else max(lims)
         out[p] = mde
