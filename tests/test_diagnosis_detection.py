@@ -84,10 +84,10 @@ def test_the_limit_is_given_for_every_deterministic_effect(phase_limit):
     for name, d in lim["effects"].items():
         assert "error" not in d and d["params"], name
         assert all(v is None or v > 0 for v in d["params"].values()), (name, d)
-    text = "\n".join(detection_lines(lim, "none", []))
+    text = "\n".join(detection_lines(lim, []))
     assert "Nothing was attributed" in text and "kappa_urad_per_K" in text
     assert ("at the unit's tolerance bound" in text) == bool(lim["knobs_at_bound"])
-    flagged = "\n".join(detection_lines(dict(lim, knobs_at_bound=["demod_phase_mrad"]), "none", []))
+    flagged = "\n".join(detection_lines(dict(lim, knobs_at_bound=["demod_phase_mrad"]), []))
     assert "The calibration holds demod_phase_mrad at the unit's tolerance bound" in flagged
 
 

@@ -51,13 +51,12 @@ by the output's lattice).
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import lsq_linear
 from scipy.stats import norm
 
 from ..effects import MODELS
 from .attribute import (DELTA_BIC_MAX, DETERMINISTIC, FOLD_CONSISTENCY_REL, FOLD_INFO_NATS, FOLD_JOIN_NATS,
                         FOLD_MIN_NATS, FOLDS_COMBINED_Z, PARAM_Z_MIN, Scorer)
-from .fitting import DEVICE_EFFECTS
+from .fitting import DEVICE_EFFECTS, bounded_step
 from .likelihood import expected_gain, fit_params
 from .model import EffectModel
 from .parameters import NOMINAL_KNOBS
@@ -90,7 +89,8 @@ class _Refit:
     """The nominal knobs (and the effect's other parameters) refitted within their bounds on one training window,
     beside an amplitude ``a`` of one effect column: what they absorb of it, and the nats of what is left.
 
-    The refit is :meth:`.fitting.Fitter.solve`'s (weighted least squares with the knobs' priors, bounded), on the
+    The refit is :meth:`.fitting.Fitter.solve`'s (weighted least squares with the knobs' priors, bounded by
+    :func:`.fitting.bounded_step`), on the
     calibrated prediction plus ``a`` times the column; its normal matrix is built once, so each amplitude costs a
     K x K solve. While no bound is active, what is left is ``a`` times the column's projection off the knobs; a
     knob at its bound (the unit's tolerance) absorbs no more, and the rest of the signature shows.
@@ -141,17 +141,9 @@ class _Refit:
 
     def _solve(self, a: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounded solution (deviation from the linearisation point) and the mask of parameters at a bound."""
-        H, g = self.H, self.g0 + a * self.gu
-        sc = np.sqrt(np.clip(np.diag(H), 1e-300, None))
-        Hs = H / np.outer(sc, sc) + 1e-12 * np.eye(len(sc))
-        gs, lo, hi = g / sc, self.lo * sc, self.hi * sc
-        lo = np.where(lo >= hi, hi - 1e-12, lo)
-        ds = np.linalg.solve(Hs, gs)
-        if np.any(ds < lo) or np.any(ds > hi):
-            R = np.linalg.cholesky(Hs).T
-            ds = lsq_linear(R, np.linalg.solve(R.T, gs), bounds=(lo, hi), method="bvls").x
+        d, ds, lo, hi = bounded_step(self.H, self.g0 + a * self.gu, self.lo, self.hi)
         active = (ds <= lo + 1e-9 * np.maximum(1.0, np.abs(lo))) | (ds >= hi - 1e-9 * np.maximum(1.0, np.abs(hi)))
-        return ds / sc, active
+        return d, active
 
     def at(self, a: float) -> tuple[float, float]:
         """Nats of what is left of amplitude ``a`` after the refit, and the amplitude's Fisher information with the

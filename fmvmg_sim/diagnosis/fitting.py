@@ -336,19 +336,7 @@ class Fitter:
         MtM, Mtb = M.T @ M, M.T @ b
         PtP, Ptb = P.T @ P, P.T @ pb
         H, g = MtM + PtP, Mtb + Ptb
-        scale = np.sqrt(np.clip(np.diag(H), 0, None))
-        scale = np.where(scale > 0, scale, 1.0)
-        Hs = H / np.outer(scale, scale) + 1e-12 * np.eye(K)
-        gs = g / scale
-        lo = (lin.lo - lin.x0) * scale
-        hi = (lin.hi - lin.x0) * scale
-        lo = np.where(lo >= hi, hi - 1e-12, lo)
-        ds = np.linalg.solve(Hs, gs)
-        if np.any(ds < lo) or np.any(ds > hi):
-            R = np.linalg.cholesky(Hs).T
-            c = np.linalg.solve(R.T, gs)
-            ds = lsq_linear(R, c, bounds=(lo, hi), method="bvls").x
-        d = ds / scale
+        d, ds, lo, hi = bounded_step(H, g, lin.lo - lin.x0, lin.hi - lin.x0)
         x = lin.x0 + d
         cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
         cov0 = scaled_inverse(H)  # H = M.T @ M + P.T @ P
@@ -514,6 +502,42 @@ def transient_blocks(prep: Prepared) -> np.ndarray:
         out[b] = True
         out[np.minimum(b + 1, prep.n_blocks - 1)] = True
     return out
+
+
+def bounded_step(H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple:
+    """The bounded minimiser ``d`` of ``d^T H d / 2 - g^T d`` with ``lo <= d <= hi`` (normal equations, column-scaled;
+    the bounds solved on the K x K Cholesky factor by BVLS only when the free solution leaves them).
+
+    Parameters
+    ----------
+    H : ndarray, shape (K, K)
+        Normal matrix (data and priors).
+    g : ndarray, shape (K,)
+    lo, hi : ndarray, shape (K,)
+        Bounds on the step.
+
+    Returns
+    -------
+    d : ndarray
+        The step.
+    ds, lo_s, hi_s : ndarray
+        The step and its bounds in the scaled coordinates ``d * sqrt(diag(H))`` (an active bound is where ``ds``
+        equals one of them).
+    """
+    K = len(g)
+    scale = np.sqrt(np.clip(np.diag(H), 0, None))
+    scale = np.where(scale > 0, scale, 1.0)
+    Hs = H / np.outer(scale, scale) + 1e-12 * np.eye(K)
+    gs = g / scale
+    lo = lo * scale
+    hi = hi * scale
+    lo = np.where(lo >= hi, hi - 1e-12, lo)
+    ds = np.linalg.solve(Hs, gs)
+    if np.any(ds < lo) or np.any(ds > hi):
+        R = np.linalg.cholesky(Hs).T
+        c = np.linalg.solve(R.T, gs)
+        ds = lsq_linear(R, c, bounds=(lo, hi), method="bvls").x
+    return ds / scale, ds, lo, hi
 
 
 def effect_bounds(name: str) -> tuple[list, np.ndarray, np.ndarray]:

@@ -106,14 +106,13 @@ def in_sample_lines(hint: dict | None) -> list[str]:
     return L + [""]
 
 
-def detection_lines(det: dict | None, verdict: str, accepted: list) -> list[str]:
+def detection_lines(det: dict | None, accepted: list) -> list[str]:
     """The detection limits as a table: what this record would have attributed, and what could hide in it.
 
     Parameters
     ----------
     det : dict or None
         The report's ``detection_limits`` (:func:`.detection.detection_limits` with its ``power``).
-    verdict : str
     accepted : list of str
 
     Returns
@@ -149,12 +148,11 @@ def detection_lines(det: dict | None, verdict: str, accepted: list) -> list[str]
     if det.get("knobs_at_bound") and not accepted:
         # (beside an accepted effect a knob at its bound is the effect's doing; here it bears on what could hide)
         L += ["", f"The calibration holds {', '.join(det['knobs_at_bound'])} at the unit's tolerance bound: a knob there "
-              "absorbs no more in one direction, so the limit of an effect that knob mimics can be optimistic (a "
-              "feedthrough beside the demodulation phase and sense gain at their bounds was missed at 22 times its "
-              "limit, its signature SNR 1.5; session 46)."]
+              "absorbs no more in one direction, so the limit of an effect that knob mimics can be optimistic (the limits "
+              "read both signs of each effect for this reason)."]
     L += ["", "Each parameter alone, at the calibrated unit: the nominal knobs (within their tolerance bounds) and the "
           "effect's other parameters refit beside it on each fold's training window, and the acceptance criteria are "
-          "simulated on what they leave (a signed parameter: the larger limit of its two signs). Noise-level effects "
+          "simulated on what they leave (the larger limit of the effect's two signs). Noise-level effects "
           "(extra flicker, a coarser converter) are judged by their Allan band and the output lattice instead."]
     return L
 
@@ -263,7 +261,7 @@ def markdown(rep: dict) -> str:
               + ". With every knob free its fit was refused at a physical bound; the record does not identify these "
               "knobs (calibration table), so the effect's amplitude can trade against them, and it was fitted again "
               "with them held at their calibrated values."]
-    L += detection_lines(rep.get("detection_limits"), rep["verdict"], rep["accepted"])
+    L += detection_lines(rep.get("detection_limits"), rep["accepted"])
     c = rep.get("combined")
     if c:
         L += ["", f"## 4. Gap before and after ({' + '.join(c['effects'])}), held-out data", "",
