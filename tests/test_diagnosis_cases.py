@@ -399,6 +399,24 @@ def test_a_partial_single_effect_gives_way_to_a_stronger_pair(tmp_path):
     assert not row["accepted"] and "pair fitted from scratch" in row["why_not"][0]
 
 
+def test_a_pair_that_leaves_the_located_gap_open_does_not_replace_the_single_effect(tmp_path):
+    # benchmark case 90556/5 (one effect per case, regenerated from its seed): a Q drift of SNR 585 passes alone with
+    # the cooling regime left open (shrink 0.10); a reference drift without its Vref part beside a mode-split drift,
+    # fitted from scratch, gains 0.77 nats a block more held out but leaves the same regime open with the same
+    # shrink. It is no better account of where the gap lies, so the Q drift stands (session 47's rule; before it,
+    # the pair replaced the truth)
+    from fmvmg_sim.diagnosis.cases import CaseMix, make_case
+    lab = make_case(5, 90556, tmp_path, str(NOMINAL), mix=CaseMix.build(kind="single"))
+    assert list(lab["effects"]) == ["q_factor_drift"] and lab["tier"] == "above"
+    rep = diagnose(lab["record"], NOMINAL, n_null=4, progress=False, log=lambda m: None)
+    assert rep["accepted"] == ["q_factor_drift"], (rep["accepted"], rep["verdict"])
+    assert rep["replaced_partial"] is None
+    assert sorted(rep["pair_left_gap_open"]) == ["mode_split_drift", "reference_drift"]
+    # the gap stays open either way: a partial verdict, with the look-alike named
+    assert rep["verdict"] == "unexplained" and [s["name"] for s in rep["closure"]["open"]] == ["cooling"]
+    assert rep["ambiguous_with"] == {"q_factor_drift": ["reference_drift"]}
+
+
 def test_a_located_gap_is_named_by_an_effect_that_fails_only_the_fold_count(tmp_path):
     # benchmark case 90001/22 (regenerated from its seed): a feedthrough of SNR 62 on a record whose first training
     # window holds one temperature and whose second fold is tested wholly by extrapolation; its pooled held-out

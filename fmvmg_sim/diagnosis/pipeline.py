@@ -481,16 +481,24 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     if closure and closure["open"] and len(att["selected"]) == 1:
         # one effect explains part of the located gap, not where it lies: it may be a bystander that two
         # strong effects, each failing alone on the other's signature, let through (as when no single effect
-        # passes); a pair fitted from scratch replaces it when it passes and gains more held-out (the flicker
-        # band stays as judged on what the single effect left: not accepted, as the closure was judged)
+        # passes); a pair fitted from scratch replaces it when it passes, gains more held-out and closes the
+        # located gap (the flicker band stays as judged on what the single effect left: not accepted, as the
+        # closure was judged). A pair that leaves the gap open as well is no better account of where it lies
+        # than the single effect, and the simpler answer stands (pre-registration of session 47)
         sel2, fin2, scan2, alts2 = pairs_from_scratch(scorer, att["single"])
         # both gains are over the nominal model, on the same folds (the single effect's from the scan)
         if fin2 is not None and fin2["gain"]["gain"] > att["final"]["gain"]["gain"]:
-            log(f"pair from scratch {'+'.join(sel2)} replaces {att['selected'][0]} (the located gap stayed open)")
-            att = dict(att, selected=sel2, final=fin2, pair_scan=scan2, pair_alternatives=alts2,
-                       replaced_partial=att["selected"][0])
-            final_pred_tr = fin2["fit"]._ctx["pred"]
-            closure = _closure(prep, fitter, att, final_pred_tr, sig_located, flick_ok, localization, st_null)
+            att2 = dict(att, selected=sel2, final=fin2, pair_scan=scan2, pair_alternatives=alts2,
+                        replaced_partial=att["selected"][0])
+            pred2 = fin2["fit"]._ctx["pred"]
+            closure2 = _closure(prep, fitter, att2, pred2, sig_located, flick_ok, localization, st_null)
+            if closure2 and closure2["open"]:
+                log(f"pair from scratch {'+'.join(sel2)} leaves the located gap open too: "
+                    f"{att['selected'][0]} stands")
+                att = dict(att, pair_left_gap_open=sel2)
+            else:
+                log(f"pair from scratch {'+'.join(sel2)} replaces {att['selected'][0]} (it closes the located gap)")
+                att, final_pred_tr, closure = att2, pred2, closure2
     if sig and not (q or flick_ok or att["selected"]):
         # a gap the localisation established and no effect was accepted for: an effect that fails only the fold
         # count names it (a record whose design leaves few scored folds); the closure check judges it as any
@@ -593,7 +601,8 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
         "localization": localization, "separating_experiments": experiments, "remainder": remainder,
         "closure": closure, "in_sample_candidates": hint, "design": design,
         "detection_limits": {"power": POWER, "effects": limits, "knobs_at_bound": list(cal.at_bound)},
-        "replaced_partial": att.get("replaced_partial"), "replaced_first": att.get("replaced_first"),
+        "replaced_partial": att.get("replaced_partial"), "pair_left_gap_open": att.get("pair_left_gap_open"),
+        "replaced_first": att.get("replaced_first"),
         "located_gap": att.get("located_gap"),
         "primary_metric": primary, "combined": combined,
         "calibration": cal.to_json(),
