@@ -415,6 +415,8 @@ def test_a_pair_that_leaves_the_located_gap_open_does_not_replace_the_single_eff
     # the gap stays open either way: a partial verdict, with the look-alike named
     assert rep["verdict"] == "unexplained" and [s["name"] for s in rep["closure"]["open"]] == ["cooling"]
     assert rep["ambiguous_with"] == {"q_factor_drift": ["reference_drift"]}
+    from fmvmg_sim.diagnosis.report import markdown
+    assert "A pair fitted from scratch (reference_drift + mode_split_drift) gains more held out" in markdown(rep)
 
 
 def test_a_located_gap_is_named_by_an_effect_that_fails_only_the_fold_count(tmp_path):

@@ -195,6 +195,10 @@ def markdown(rep: dict) -> str:
             for s in rem["significant"][:8]:
                 L.append(f"- {s['group']} / {s['name']} (Holm p = {s['p_holm']:.2g} with the accepted effects; "
                          f"shrink {_fmt(shrink.get((s['group'], s['name'])), '.2f')})")
+            if rep.get("pair_left_gap_open"):
+                L += ["", f"A pair fitted from scratch ({' + '.join(rep['pair_left_gap_open'])}) gains more held out "
+                      "but leaves the gap open as well, so it is no better account of where the gap lies and the "
+                      "single effect stands."]
         else:
             for s in rem["significant"][:8]:
                 L.append(f"- {s['group']} / {s['name']} (Holm p = {s['p_holm']:.2g})")
