@@ -1,14 +1,28 @@
-"""Compile a step function: CasADi builds it symbolically and generates C; gcc builds a library.
+"""Compile a step function: CasADi builds it symbolically, this module writes its C, gcc builds a library.
 
 A :class:`StepModel` is a step function ``x+ = f(x, p, w)`` written against a math
 backend, with the layouts of its state ``x``, its parameters ``p`` (which change
-every parameter block) and its per-step inputs ``w``. CasADi generates the C of one
-step; a short hand-written C loop in the same translation unit rolls it out, so gcc
-can inline it. Libraries are cached under ``$FMVMG_CACHE_DIR`` (default
-``~/.cache/fmvmg_sim``), keyed by a hash of the C source and the compiler command:
-the first run pays the compile (a few seconds), later runs load the library. Without
-a working C compiler the same roll-out runs in CasADi's virtual machine (several
-times slower) and the engine says so once.
+every parameter block) and its per-step inputs ``w``. CasADi turns it into one
+straight-line expression graph; :func:`c_source` writes that graph as an inlined C
+function of a *lane* (one simulated unit) and a short roll-out loop around it, so
+that
+
+* one unit runs as plain scalar code with nothing between two steps but the step
+  itself (no calls, no argument checks, no copies), and
+* ``L`` units of the same model (different parameters: tolerances, temperatures,
+  seeds) run in one call, their states side by side (structure of arrays) so that gcc
+  vectorises the step across units.
+
+The arithmetic of each unit is the expression graph's, operation by operation, so a
+unit gives the same numbers alone or among others.
+
+Libraries are cached under ``$FMVMG_CACHE_DIR`` (default ``~/.cache/fmvmg_sim``),
+keyed by a hash of the C source, the compiler command and the CPU. Each library has a
+``.sha256`` file beside it; an entry is loaded only after its content matches, and a
+bad entry (truncated, altered, missing its hash) is rebuilt with one warning line.
+The first run pays the compile (a few seconds), later runs load the library. Without a
+working C compiler the same roll-out runs in CasADi's virtual machine (several times
+slower) and the engine says so once.
 """
 
 from __future__ import annotations
@@ -32,9 +46,12 @@ from .carrier.layout import Layout
 
 _WARNED = False
 #: -march=native is worth 25 % on the carrier step; the cache key includes the CPU so a library built for
-#: one processor is never loaded on another.
-CFLAGS = ["-O2", "-march=native", "-fPIC", "-shared"]
-FALLBACK_CFLAGS = ["-O2", "-fPIC", "-shared"]
+#: one processor is never loaded on another. -ftree-vectorize with the dynamic cost model vectorises the
+#: step across units (-fno-trapping-math lets it turn the step's selects into blends); -fno-math-errno lets
+#: sqrt be one instruction. Neither changes a result: they drop errno and floating-point trap semantics only.
+CFLAGS = ["-O2", "-march=native", "-ftree-vectorize", "-fvect-cost-model=dynamic", "-fno-math-errno",
+          "-fno-trapping-math", "-fPIC", "-shared"]
+FALLBACK_CFLAGS = ["-O2", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared"]
 
 
 def _cpu_id() -> str:
@@ -47,10 +64,20 @@ def _cpu_id() -> str:
     keep = [ln for ln in text.splitlines() if ln.startswith(("model name", "flags"))][:2]
     return "\n".join(keep)
 
-_DRIVER = r"""
+
+_HEADER = r"""
+#include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <stdint.h>
+#define EXPORT __attribute__((visibility("default")))
+/* fmin/fmax as selects (C99 semantics for NaN arguments), so that the lane loop vectorises */
+static inline double PREFIX_fmin(double a, double b) { return ((a < b) | (b != b)) ? a : b; }
+static inline double PREFIX_fmax(double a, double b) { return ((a > b) | (b != b)) ? a : b; }
+static inline double PREFIX_sign(double a) { return a < 0 ? -1.0 : (a > 0 ? 1.0 : a); }
+"""
+
+_DRIVER = r"""
 /* ---- noise: xoshiro256+ uniforms and Doornik's ZIGNOR ziggurat (2005) for standard normals ---- */
 typedef struct { uint64_t s[4]; } PREFIX_rng;
 static inline uint64_t PREFIX_rotl(const uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
@@ -84,11 +111,8 @@ static void PREFIX_zig_init(void) {
   for (int i = 0; i < ZIG_C; ++i) PREFIX_zr[i] = PREFIX_zx[i + 1] / PREFIX_zx[i];
   PREFIX_zinit = 1;
 }
-static double PREFIX_normal(PREFIX_rng* r) {
+static __attribute__((noinline)) double PREFIX_normal_slow(PREFIX_rng* r, double u, unsigned int i) {
   for (;;) {
-    double u = 2 * PREFIX_u01(r) - 1;
-    unsigned int i = (unsigned int)(PREFIX_next(r) & 0x7F);
-    if (fabs(u) < PREFIX_zr[i]) return u * PREFIX_zx[i];
     if (i == 0) {  /* the tail beyond R */
       double x, y;
       do { x = log(PREFIX_u01(r)) / ZIG_R; y = log(PREFIX_u01(r)); } while (-2 * y < x * x);
@@ -98,49 +122,115 @@ static double PREFIX_normal(PREFIX_rng* r) {
     double f0 = exp(-0.5 * (PREFIX_zx[i] * PREFIX_zx[i] - x * x));
     double f1 = exp(-0.5 * (PREFIX_zx[i + 1] * PREFIX_zx[i + 1] - x * x));
     if (f1 + PREFIX_u01(r) * (f0 - f1) < 1.0) return x;
+    u = 2 * PREFIX_u01(r) - 1;
+    i = (unsigned int)(PREFIX_next(r) & 0x7F);
+    if (fabs(u) < PREFIX_zr[i]) return u * PREFIX_zx[i];
   }
 }
-CASADI_SYMBOL_EXPORT int PREFIX_normals_c(uint64_t seed, long n, double* out) {
+static inline double PREFIX_normal(PREFIX_rng* r) {
+  double u = 2 * PREFIX_u01(r) - 1;
+  unsigned int i = (unsigned int)(PREFIX_next(r) & 0x7F);
+  if (__builtin_expect(fabs(u) < PREFIX_zr[i], 1)) return u * PREFIX_zx[i];
+  return PREFIX_normal_slow(r, u, i);
+}
+EXPORT int PREFIX_normals_c(uint64_t seed, long n, double* out) {
   PREFIX_rng r; PREFIX_seed(&r, seed);
   if (!PREFIX_zinit) PREFIX_zig_init();
   for (long k = 0; k < n; ++k) out[k] = PREFIX_normal(&r);
   return 0;
 }
-/* Roll the step function out. K parameter blocks; each block holds NOB outputs of MO steps.
-   x0[NX]; P[K][NP]; W[K*NOB*MO][NW] per-step inputs, or NULL to draw NW standard normals per step from
-   `seed` (the first NW_NOISE inputs; models whose inputs are all noise); X[K*NOB][NX]. */
-CASADI_SYMBOL_EXPORT int PREFIX_rollout_c(const double* x0, const double* P, const double* W, double* X,
-                                         long MO, long K, long NOB, uint64_t seed) {
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  PREFIX_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  const casadi_real** arg = (const casadi_real**) malloc(sizeof(casadi_real*) * (sz_arg > 3 ? sz_arg : 3));
-  casadi_real** res = (casadi_real**) malloc(sizeof(casadi_real*) * (sz_res > 1 ? sz_res : 1));
-  casadi_int* iw = (casadi_int*) malloc(sizeof(casadi_int) * (sz_iw > 0 ? sz_iw : 1));
-  casadi_real* w = (casadi_real*) malloc(sizeof(casadi_real) * (sz_w > 0 ? sz_w : 1));
-  double xa[NX], xb[NX], wbuf[NW];
-  PREFIX_rng r; PREFIX_seed(&r, seed);
-  if (!PREFIX_zinit) PREFIX_zig_init();
-  memcpy(xa, x0, sizeof(double) * NX);
+/* Roll L units of the step function out together. K parameter blocks; each block holds NOB outputs of MO
+   steps. Arrays are unit-minor (structure of arrays): x0[NX][L]; P[K][NP][L]; W[K*NOB*MO][NW][L] per-step
+   inputs, or NULL to draw NW standard normals per step and unit from that unit's seed seeds[L];
+   X[K*NOB][NX][L] receives the state after each output's last step. Returns 0, -1 if out of memory, -2 if
+   L > 1 for a model built without lanes (LANES 0). */
+EXPORT int PREFIX_rollout_c(long L, const double* x0, const double* P, const double* W, double* X,
+                            long MO, long K, long NOB, const uint64_t* seeds) {
+  if (L > 1 && !LANES) return -2;
+  double* xa = (double*) malloc(sizeof(double) * NX * L);
+  double* xb = (double*) malloc(sizeof(double) * NX * L);
+  double* wb = (double*) malloc(sizeof(double) * (NW > 0 ? NW : 1) * L);
+  PREFIX_rng* r = (PREFIX_rng*) malloc(sizeof(PREFIX_rng) * L);
+  if (!xa || !xb || !wb || !r) { free(xa); free(xb); free(wb); free(r); return -1; }
+  if (!W) {
+    if (!PREFIX_zinit) PREFIX_zig_init();
+    for (long l = 0; l < L; ++l) PREFIX_seed(r + l, seeds[l]);
+  }
+  memcpy(xa, x0, sizeof(double) * NX * L);
   long s = 0;
   for (long k = 0; k < K; ++k) {
-    const double* p = P + k * NP;
+    const double* p = P + k * NP * L;
     for (long o = 0; o < NOB; ++o) {
       for (long m = 0; m < MO; ++m, ++s) {
-        if (W) { arg[2] = W + s * NW; }
-        else { for (int j = 0; j < NW; ++j) wbuf[j] = PREFIX_normal(&r); arg[2] = wbuf; }
-        arg[0] = xa; arg[1] = p;
-        res[0] = xb;
-        PREFIX_step(arg, res, iw, w, 0);
-        memcpy(xa, xb, sizeof(double) * NX);
+        const double* w;
+        if (W) w = W + s * NW * L;
+        else {
+          for (long l = 0; l < L; ++l)
+            for (int j = 0; j < NW; ++j) wb[j * L + l] = PREFIX_normal(r + l);
+          w = wb;
+        }
+        if (L == 1) PREFIX_step(xa, p, w, xb, 1, 0);
+#if LANES
+        else {
+#pragma GCC ivdep
+          for (long l = 0; l < L; ++l) PREFIX_step(xa, p, w, xb, L, l);
+        }
+#endif
+        double* t = xa; xa = xb; xb = t;
       }
-      memcpy(X + (k * NOB + o) * NX, xa, sizeof(double) * NX);
-      for (int q = 0; q < NRESET; ++q) xa[RESET_IDX[q]] = 0.0;  /* integrate-and-dump accumulators */
+      memcpy(X + (k * NOB + o) * NX * L, xa, sizeof(double) * NX * L);
+      for (int q = 0; q < NRESET; ++q)  /* integrate-and-dump accumulators */
+        for (long l = 0; l < L; ++l) xa[RESET_IDX[q] * L + l] = 0.0;
     }
   }
-  free(arg); free(res); free(iw); free(w);
+  free(xa); free(xb); free(wb); free(r);
   return 0;
 }
 """
+
+# C of each CasADi operation (CasADi's own codegen semantics, operation by operation)
+_UNARY = {
+    "OP_ASSIGN": "{0}", "OP_NEG": "(-{0})", "OP_SQ": "({0}*{0})", "OP_TWICE": "(2.*{0})", "OP_INV": "(1./{0})",
+    "OP_SQRT": "sqrt({0})", "OP_FABS": "fabs({0})", "OP_NOT": "(!{0})", "OP_SIN": "sin({0})", "OP_COS": "cos({0})",
+    "OP_TAN": "tan({0})", "OP_EXP": "exp({0})", "OP_LOG": "log({0})", "OP_FLOOR": "floor({0})",
+    "OP_CEIL": "ceil({0})", "OP_TANH": "tanh({0})", "OP_SIGN": "PREFIX_sign({0})", "OP_ATAN": "atan({0})",
+}
+_BINARY = {
+    "OP_ADD": "({0}+{1})", "OP_SUB": "({0}-{1})", "OP_MUL": "({0}*{1})", "OP_DIV": "({0}/{1})",
+    "OP_LT": "({0}<{1})", "OP_LE": "({0}<={1})", "OP_EQ": "({0}=={1})", "OP_NE": "({0}!={1})",
+    "OP_AND": "({0}&&{1})", "OP_OR": "({0}||{1})", "OP_IF_ELSE_ZERO": "({0}?{1}:0)",
+    "OP_FMIN": "PREFIX_fmin({0},{1})", "OP_FMAX": "PREFIX_fmax({0},{1})", "OP_POW": "pow({0},{1})",
+    "OP_CONSTPOW": "pow({0},{1})", "OP_ATAN2": "atan2({0},{1})", "OP_HYPOT": "hypot({0},{1})",
+    "OP_COPYSIGN": "copysign({0},{1})",
+}
+_OPS = {getattr(ca, n): n for n in dir(ca) if n.startswith("OP_")}
+
+
+def _step_c(model: "StepModel") -> str:
+    """The model's step as an inline C function of one lane (unit ``l`` of ``L``, unit-minor arrays)."""
+    f = model.casadi_function()
+    arrays = ("x", "p", "w")
+    body = []
+    for k in range(f.n_instructions()):
+        op = _OPS[f.instruction_id(k)]
+        o, i = f.instruction_output(k), f.instruction_input(k)
+        if op == "OP_INPUT":
+            body.append(f"  w{o[0]}={arrays[i[0]]}[{i[1]}*L+l];")
+        elif op == "OP_OUTPUT":
+            body.append(f"  y[{o[1]}*L+l]=w{i[0]};")
+        elif op == "OP_CONST":
+            body.append(f"  w{o[0]}={float(f.instruction_constant(k)).hex()};")
+        elif op in _UNARY:
+            body.append(f"  w{o[0]}={_UNARY[op].format(f'w{i[0]}')};")
+        elif op in _BINARY:
+            body.append(f"  w{o[0]}={_BINARY[op].format(f'w{i[0]}', f'w{i[1]}')};")
+        else:
+            raise NotImplementedError(f"{model.name}: CasADi operation {op} has no C form here")
+    n_work = max(1, f.sz_w())
+    decl = "  double " + ", ".join(f"w{j}" for j in range(n_work)) + ";"
+    return ("static inline __attribute__((always_inline)) void PREFIX_step(const double* restrict x, "
+            "const double* restrict p, const double* restrict w, double* restrict y, const long L, const long l) {\n"
+            + decl + "\n" + "\n".join(body) + "\n}\n")
 
 
 class CasadiOps:
@@ -215,7 +305,7 @@ class StepModel:
 
 
 class Rollout:
-    """``X = rollout(x0, P, W, steps_per_output, outputs_per_block)``.
+    """``X = rollout(x0, P, W, steps_per_output, outputs_per_block)`` for one unit; :meth:`units` for many.
 
     Attributes
     ----------
@@ -223,11 +313,14 @@ class Rollout:
         Whether a compiled library is used (else CasADi's virtual machine).
     compile_s : float
         Compile time of this call (0 when loaded from the cache).
+    library : str or None
+        Path of the loaded library.
     """
 
     def __init__(self, model: StepModel, fn, compiled: bool, compile_s: float = 0.0, library: str | None = None,
-                 normals=None):
+                 normals=None, lanes: bool = False):
         self.model = model
+        self.lanes = lanes
         self._fn = fn
         self._normals = normals
         self.compiled = compiled
@@ -236,19 +329,19 @@ class Rollout:
         self._vm: dict = {}
 
     def continue_from(self, x_last: np.ndarray) -> np.ndarray:
-        """The state to start the next call from: the last output row with its accumulators zeroed.
+        """The state to start the next call from: the last output row(s) with the accumulators zeroed.
 
         Parameters
         ----------
-        x_last : ndarray
-            Last row returned by a call.
+        x_last : ndarray, shape (n_x,) or (L, n_x)
+            Last row returned by a call (one per unit).
 
         Returns
         -------
         ndarray
         """
         x = np.array(x_last, dtype=float, copy=True)
-        x[self.model.reset_indices()] = 0.0
+        x[..., self.model.reset_indices()] = 0.0
         return x
 
     @property
@@ -274,7 +367,7 @@ class Rollout:
 
     def __call__(self, x0: np.ndarray, P: np.ndarray, W: np.ndarray | None, steps_per_output: int,
                  outputs_per_block: int = 1, seed: int = 0) -> np.ndarray:
-        """Run ``K = len(P)`` parameter blocks.
+        """Run one unit through ``K = len(P)`` parameter blocks.
 
         Parameters
         ----------
@@ -293,26 +386,71 @@ class Rollout:
             The state after each output's last step, before its accumulators are zeroed
             (continue with :meth:`continue_from`).
         """
-        K = P.shape[0]
-        nx = self.model.state.size
+        Wu = None if W is None else np.asarray(W)[None]
+        return self.units(np.asarray(x0)[None], np.asarray(P)[None], Wu, steps_per_output, outputs_per_block,
+                          seeds=[seed])[0]
+
+    def units(self, x0: np.ndarray, P: np.ndarray, W: np.ndarray | None, steps_per_output: int,
+              outputs_per_block: int = 1, seeds=None) -> np.ndarray:
+        """Run ``L`` units of the model together, each with its own parameters, inputs and seed.
+
+        Unit ``u``'s result equals what a call with ``x0[u]``, ``P[u]``, ``W[u]`` and ``seeds[u]`` alone
+        gives, bit for bit.
+
+        Parameters
+        ----------
+        x0 : ndarray, shape (L, n_x)
+        P : ndarray, shape (L, K, n_p)
+        W : ndarray, shape (L, K * outputs_per_block * steps_per_output, n_w), or None
+            Per-step inputs; ``None`` lets the compiled code draw each unit's as standard normals from its seed.
+        steps_per_output : int
+        outputs_per_block : int, optional
+        seeds : sequence of int, optional
+            One seed per unit (used when ``W`` is None).
+
+        Returns
+        -------
+        ndarray, shape (L, K * outputs_per_block, n_x)
+        """
+        x0 = np.asarray(x0, dtype=float)
+        P = np.asarray(P, dtype=float)
+        L, K = P.shape[0], P.shape[1]
+        nx, npar, nw = self.model.state.size, self.model.params.size, self.model.n_inputs
         Mo, nob = int(steps_per_output), int(outputs_per_block)
+        if x0.shape != (L, nx) or P.shape != (L, K, npar):
+            raise ValueError(f"x0 {x0.shape} and P {P.shape} do not match L={L}, n_x={nx}, n_p={npar}")
         if W is None and not self.compiled:
             raise ValueError("the virtual-machine roll-out needs its inputs W")
-        if W is not None and W.shape != (K * nob * Mo, self.model.n_inputs):
-            raise ValueError(f"W has shape {W.shape}, expected {(K * nob * Mo, self.model.n_inputs)}")
-        if self.compiled:
-            x0 = np.ascontiguousarray(x0, dtype=float)
-            P = np.ascontiguousarray(P, dtype=float)
-            X = np.empty((K * nob, nx))
-            dp = ctypes.POINTER(ctypes.c_double)
-            if W is None:
-                wp = ctypes.cast(None, dp)
-            else:
-                W = np.ascontiguousarray(W, dtype=float)
-                wp = W.ctypes.data_as(dp)
-            self._fn(x0.ctypes.data_as(dp), P.ctypes.data_as(dp), wp, X.ctypes.data_as(dp),
-                     ctypes.c_long(Mo), ctypes.c_long(K), ctypes.c_long(nob), ctypes.c_uint64(int(seed) % 2 ** 64))
-            return X
+        if W is not None and np.shape(W) != (L, K * nob * Mo, nw):
+            raise ValueError(f"W has shape {np.shape(W)}, expected {(L, K * nob * Mo, nw)}")
+        if not self.compiled:
+            return np.stack([self._vm_one(x0[u], P[u], np.asarray(W[u], dtype=float), Mo, nob) for u in range(L)])
+        seeds = np.zeros(L, dtype=np.uint64) if seeds is None else np.array(
+            [int(s) % 2 ** 64 for s in seeds], dtype=np.uint64)
+        if seeds.shape != (L,):
+            raise ValueError(f"{seeds.size} seeds for {L} units")
+        if L > 1 and not self.lanes:  # built without the vectorised path: one unit after the other
+            return np.stack([self.units(x0[u:u + 1], P[u:u + 1], None if W is None else W[u:u + 1], Mo, nob,
+                                        seeds=seeds[u:u + 1])[0] for u in range(L)])
+        # unit-minor (structure of arrays) for the compiled lanes; a no-op copy for one unit
+        xs = np.ascontiguousarray(x0.T)
+        Ps = np.ascontiguousarray(P.transpose(1, 2, 0))
+        X = np.empty((K * nob, nx, L))
+        dp = ctypes.POINTER(ctypes.c_double)
+        if W is None:
+            wp = ctypes.cast(None, dp)
+        else:
+            Ws = np.ascontiguousarray(np.asarray(W, dtype=float).transpose(1, 2, 0))
+            wp = Ws.ctypes.data_as(dp)
+        rc = self._fn(ctypes.c_long(L), xs.ctypes.data_as(dp), Ps.ctypes.data_as(dp), wp, X.ctypes.data_as(dp),
+                      ctypes.c_long(Mo), ctypes.c_long(K), ctypes.c_long(nob),
+                      seeds.ctypes.data_as(ctypes.POINTER(ctypes.c_uint64)))
+        if rc != 0:
+            raise MemoryError(f"the compiled roll-out could not allocate its work arrays for {L} units")
+        return X.transpose(2, 0, 1)
+
+    def _vm_one(self, x0, P, W, Mo, nob):
+        nx = self.model.state.size
         key = (Mo, nob)
         if key not in self._vm:
             f = self.model.casadi_function()
@@ -323,6 +461,7 @@ class Rollout:
             self._vm[key] = ca.Function("one", [x0s, ps, Ws], [inner(x0s, ca.repmat(ps, 1, Mo), Ws)[:, Mo - 1]])
         F = self._vm[key]
         reset = self.model.reset_indices()
+        K = P.shape[0]
         out = np.empty((K * nob, nx))
         x = np.asarray(x0, dtype=float).copy()
         Wt = W.T
@@ -348,50 +487,92 @@ def cache_dir() -> Path:
     return Path(root)
 
 
-_SOURCES: dict[str, bytes] = {}
+_SOURCES: dict[tuple, bytes] = {}
 
 
-def c_source(model: StepModel) -> bytes:
-    """The C source: CasADi's generated step plus the roll-out driver (memoised per process).
+def c_source(model: StepModel, lanes: bool = False) -> bytes:
+    """The C source: the model's step as an inline lane function plus the roll-out driver (memoised).
 
     Parameters
     ----------
     model : StepModel
+    lanes : bool, optional
+        Include the vectorised path that advances many units per call.
 
     Returns
     -------
     bytes
     """
-    if model.name in _SOURCES:
-        return _SOURCES[model.name]
-    f = model.casadi_function()
-    with tempfile.TemporaryDirectory() as tmp:
-        cwd = os.getcwd()
-        try:
-            os.chdir(tmp)
-            f.generate(f"{model.name}_step.c")
-        finally:
-            os.chdir(cwd)
-        src = (Path(tmp) / f"{model.name}_step.c").read_text()
+    if (model.name, lanes) in _SOURCES:
+        return _SOURCES[model.name, lanes]
     idx = model.reset_indices()
     defs = (f"#define NX {model.state.size}\n#define NP {model.params.size}\n#define NW {model.n_inputs}\n"
-            f"#define NRESET {len(idx)}\n"
+            f"#define NRESET {len(idx)}\n#define LANES {int(lanes)}\n"
             f"static const int RESET_IDX[{max(1, len(idx))}] = {{{', '.join(map(str, idx)) or '0'}}};\n")
-    driver = _DRIVER.replace("PREFIX", model.name)
-    marker = "#ifdef __cplusplus\n} /* extern \"C\" */\n#endif"
-    src = src.replace(marker, defs + driver + "\n" + marker) if marker in src else src + defs + driver
-    _SOURCES[model.name] = src.encode()
-    return _SOURCES[model.name]
+    src = (f"/* {model.name}: generated by fmvmg_sim.compiled from the model's CasADi expression graph */\n"
+           + _HEADER + defs + _step_c(model) + _DRIVER).replace("PREFIX", model.name)
+    _SOURCES[model.name, lanes] = src.encode()
+    return _SOURCES[model.name, lanes]
 
 
-def load_rollout(model: StepModel, log=None) -> Rollout:
+def _digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _entry_ok(lib: Path) -> bool | None:
+    """Whether the cached library ``lib`` matches its recorded content hash (None: no entry at all)."""
+    side = lib.with_name(lib.name + ".sha256")
+    if not lib.exists() and not side.exists():
+        return None
+    try:
+        return side.read_text().split()[0] == _digest(lib)
+    except (OSError, IndexError):
+        return False
+
+
+def _build(cc_path: str, src: bytes, lib: Path, name: str) -> str | None:
+    """Compile ``src`` into the cache entry ``lib`` (library, then its hash, each renamed into place).
+
+    Returns None on success, else the compiler's message.
+    """
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        cpath = Path(tmp) / f"{name}.c"
+        cpath.write_bytes(src)
+        tmp_lib = lib.parent / f".{lib.name}.{os.getpid()}.tmp"
+        res = subprocess.run([cc_path, *CFLAGS, str(cpath), "-o", str(tmp_lib), "-lm"], capture_output=True, text=True)
+        if res.returncode != 0:  # a compiler without -march=native: portable flags
+            res = subprocess.run([cc_path, *FALLBACK_CFLAGS, str(cpath), "-o", str(tmp_lib), "-lm"],
+                                 capture_output=True, text=True)
+        if res.returncode != 0:
+            tmp_lib.unlink(missing_ok=True)
+            return res.stderr.strip()[:200]
+        digest = _digest(tmp_lib)
+        tmp_side = lib.parent / f".{lib.name}.sha256.{os.getpid()}.tmp"
+        tmp_side.write_text(digest + "\n")
+        os.replace(tmp_lib, lib)
+        os.replace(tmp_side, lib.with_name(lib.name + ".sha256"))
+    return None
+
+
+def load_rollout(model: StepModel, log=None, lanes: bool = False) -> Rollout:
     """The roll-out of ``model``, compiled and cached when a C compiler is available.
+
+    A cached library is loaded only after its content matches the hash recorded when it was
+    built; a bad entry is rebuilt (one warning line).
 
     Parameters
     ----------
     model : StepModel
     log : callable, optional
-        Receives one-line messages (compile time, fallback notice); default stderr.
+        Receives one-line messages (compile time, rebuilt entries, fallback notice); default stderr.
+    lanes : bool, optional
+        Build the vectorised path that advances many units per call (:meth:`Rollout.units`); its
+        compile takes several times longer, so a one-unit library leaves it out.
 
     Returns
     -------
@@ -407,37 +588,30 @@ def load_rollout(model: StepModel, log=None) -> Rollout:
                 "10-20x slower than compiled code")
             _WARNED = True
         return Rollout(model, None, compiled=False)
-    src = c_source(model)
+    src = c_source(model, lanes)
     key = hashlib.sha256(src + " ".join([cc] + CFLAGS).encode() + _cpu_id().encode()).hexdigest()[:20]
-    lib = cache_dir() / f"{model.name}_{key}.so"
+    lib = cache_dir() / f"{model.name}{'_lanes' if lanes else ''}_{key}.so"
     compile_s = 0.0
-    if not lib.exists():
+    ok = _entry_ok(lib)
+    if ok is not True:
+        if ok is False:
+            log(f"fmvmg: cached library {lib} failed its content check (truncated or altered); rebuilding it")
         t0 = time.perf_counter()
-        lib.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory() as tmp:
-            cpath = Path(tmp) / f"{model.name}.c"
-            cpath.write_bytes(src)
-            tmp_lib = lib.parent / f".{lib.name}.{os.getpid()}.tmp"
-            res = subprocess.run([cc_path, *CFLAGS, str(cpath), "-o", str(tmp_lib), "-lm"],
-                                 capture_output=True, text=True)
-            if res.returncode != 0:  # a compiler without -march=native: portable flags
-                res = subprocess.run([cc_path, *FALLBACK_CFLAGS, str(cpath), "-o", str(tmp_lib), "-lm"],
-                                     capture_output=True, text=True)
-            if res.returncode != 0:
-                if not _WARNED:
-                    log(f"fmvmg: C compile failed ({res.stderr.strip()[:200]}); "
-                        "the engines run in CasADi's virtual machine (slower)")
-                    _WARNED = True
-                return Rollout(model, None, compiled=False)
-            os.replace(tmp_lib, lib)
+        err = _build(cc_path, src, lib, model.name)
+        if err is not None:
+            if not _WARNED:
+                log(f"fmvmg: C compile failed ({err}); the engines run in CasADi's virtual machine (slower)")
+                _WARNED = True
+            return Rollout(model, None, compiled=False)
         compile_s = time.perf_counter() - t0
         log(f"fmvmg: compiled the {model.name} step function in {compile_s:.1f} s (cached in {lib.parent})")
     cdll = ctypes.CDLL(str(lib))
     fn = getattr(cdll, f"{model.name}_rollout_c")
     dp = ctypes.POINTER(ctypes.c_double)
-    fn.argtypes = [dp, dp, dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long, ctypes.c_uint64]
+    fn.argtypes = [ctypes.c_long, dp, dp, dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long,
+                   ctypes.POINTER(ctypes.c_uint64)]
     fn.restype = ctypes.c_int
     normals = getattr(cdll, f"{model.name}_normals_c")
     normals.argtypes = [ctypes.c_uint64, ctypes.c_long, dp]
     normals.restype = ctypes.c_int
-    return Rollout(model, fn, compiled=True, compile_s=compile_s, library=str(lib), normals=normals)
+    return Rollout(model, fn, compiled=True, compile_s=compile_s, library=str(lib), normals=normals, lanes=lanes)
