@@ -1,26 +1,35 @@
-"""Run a scenario at carrier level: the compiled step rolled out with temperature and rate as inputs.
+"""Run scenarios at carrier level: the compiled step rolled out with temperature and rate as inputs.
 
-The run is cut into output samples of ``M`` steps. Each sample has its parameter
-vector: the discretised diagram at the sample's temperature (cached per 1 mK), the
-input rate, and the demodulation-phase flicker. Noise draws come from one seeded
-generator in a fixed order, so a seed gives the same record bit for bit.
+A run is cut into output samples of ``M`` steps. Each sample has its parameter
+vector: the discretised diagram at the sample's temperature (an operating point,
+cached per 1 mK and kept across runs of the same device in a process), the input
+rate, and the demodulation-phase flicker. Noise draws come from one seeded
+generator per unit in a fixed order, so a seed gives the same record bit for bit.
+
+:func:`run_carrier_units` advances many units (scenarios of the same diagram with
+different device values, temperatures, rates or seeds) together, in one compiled
+call per chunk vectorised across units; each unit's record is the one
+:func:`run_carrier` gives it alone.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 import time
+from collections import OrderedDict
+from contextlib import nullcontext
 
 import numpy as np
 from tqdm import tqdm
 
 from .. import noise as noisegen
 from ..averaged import scale_factor_V_per_dps
+from ..compiled import load_rollout
 from ..diagram import build_diagram
 from ..effects import EffectSet
 from ..result import SimResult
 from ..scenario import Scenario
-from ..compiled import load_rollout
 from .plan import initial_state, make_plan
 from .step import CARRIER_MODEL, N_NOISE, PARAMS, STATE
 
@@ -30,10 +39,201 @@ STATE_P = PARAMS.size
 T_QUANTUM_K = 1e-3
 #: Target number of simulated seconds per compiled call (progress-bar granularity).
 CALL_S = 0.02
+#: Operating points kept across runs in one process (a few kB each).
+PLAN_CACHE_SIZE = 512
+
+_PLANS: OrderedDict = OrderedDict()
 
 
 def _state(X, name):
     return X[:, STATE.slices[name]]
+
+
+def _one_blas_thread():
+    """A context pinning the BLAS libraries to one thread (the plans' matrices are 2x2 to 16x16).
+
+    scipy's OpenBLAS otherwise wakes a worker thread for the matrix exponentials, which then
+    spins for a while after each call: it doubles the CPU a run takes and gains nothing.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+        return nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+class _Unit:
+    """One scenario's inputs, operating points, state and generator, prepared for the roll-out."""
+
+    def __init__(self, scn: Scenario):
+        self.scn = scn
+        self.wall0 = time.perf_counter()
+        dev = self.dev = scn.device
+        st = scn.settings["scenario"]
+        ref = self.ref = build_diagram(dev, dev.reference_temperature_C)
+        self.f_ref = ref.resonator.f_drive_Hz
+        self.spc = int(st["steps_per_cycle"])
+        h = self.h = 1.0 / (self.spc * self.f_ref)
+        M = self.M = max(1, int(round(1.0 / (st["output_rate_Hz"] * h))))
+        self.dt_out = dt_out = M * h
+        n = self.n = int(np.ceil(scn.duration_s / dt_out - 1e-9))
+        self.t_end = (np.arange(n) + 1) * dt_out
+        t_mid = self.t_end - dt_out / 2
+        case_mid = np.asarray(scn.temperature(t_mid), dtype=float)
+        fx = self.fx = EffectSet(scn.effects)
+        temp = fx.die_temperature(t_mid, case_mid)
+        self.sig = fx.signals(t_mid, temp)
+        self.rate_dps = np.asarray(scn.rate(t_mid), dtype=float) + self.sig["rate_dps"]
+        self.rate_end = np.asarray(scn.rate(self.t_end), dtype=float)
+        self.vref_f = np.asarray(scn.vref_factor(t_mid), dtype=float)
+        self.rng = rng = np.random.default_rng(scn.seed)
+        nz = self.nz = scn.noise
+        # slow noises at the output rate, drawn first so they do not depend on call sizes
+        self.phase_flicker = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_phase_rad2"], rng)
+                              if nz["flicker"] else np.zeros(n))
+        sf_nom = self.sf_nom = scale_factor_V_per_dps(build_diagram(scn.device_nominal, dev.reference_temperature_C))
+        self.out_flicker_V = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng)
+                              * sf_nom if nz["flicker"] else np.zeros(n))
+        self.rrw_V = (noisegen.random_walk(n, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"],
+                                           rng) * sf_nom if nz["rate_random_walk"] else np.zeros(n))
+        self.noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
+        self.any_noise = nz["brownian"] or nz["electronic"]
+        self.scale = ref.core_state_scale()
+        self.keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K  # operating points, cached per 1 mK
+        self.plans: dict = {}
+        self._device_id = json.dumps(dev.values, sort_keys=True, default=repr)
+        self.per_call = max(1, int(round(CALL_S / dt_out)))
+        p0 = self.plan_for(self.keys[0])
+        self.x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
+                               from_steady=scn.settings["initial"]["state"] == "steady")
+        self.X = np.empty((n, STATE.size))
+
+    def plan_for(self, key):
+        """The operating plan at ``key`` (the die temperature, rounded)."""
+        key = float(key)
+        if key not in self.plans:
+            ck = (self._device_id, key, self.h, tuple(sorted(self.noise_on.items())), self.scale.tobytes())
+            plan = _PLANS.get(ck)
+            if plan is None:
+                with _one_blas_thread():
+                    plan = make_plan(build_diagram(self.dev, key), self.h, self.noise_on, self.scale)
+                _PLANS[ck] = plan
+                while len(_PLANS) > PLAN_CACHE_SIZE:
+                    _PLANS.popitem(last=False)
+            else:
+                _PLANS.move_to_end(ck)
+            self.plans[key] = plan
+        return self.plans[key]
+
+    def params(self, k0: int, k1: int) -> np.ndarray:
+        """Parameter rows of samples ``k0 .. k1 - 1``."""
+        P = np.empty((k1 - k0, STATE_P))
+        uniq, inv = np.unique(self.keys[k0:k1], return_inverse=True)
+        for j, key in enumerate(uniq):
+            rows = np.flatnonzero(inv == j)
+            ks = rows + k0
+            P[rows] = self.plan_for(key).params(np.deg2rad(self.rate_dps[ks]), self.phase_flicker[ks],
+                                                self.vref_f[ks], self.sig["quad_rel"][ks])
+        return P
+
+    def result(self, roll) -> SimResult:
+        """The record channels of the finished roll-out."""
+        scn, dev, nz, X, M, n = self.scn, self.dev, self.nz, self.X, self.M, self.n
+        lsb = dev.values["noise"]["quantization_lsb_V"] if nz["quantization"] else 0.0
+        # the DAQ integrates over each output interval (integrate-and-dump, no aliasing of the white noise)
+        rate_V = noisegen.quantize(_state(X, "acc_rate")[:, 0] / M + self.out_flicker_V + self.rrw_V, lsb)
+        quad_V = noisegen.quantize(_state(X, "acc_quad")[:, 0] / M, lsb)
+        ncross, tlast = _state(X, "ncross")[:, 0], _state(X, "tlast")[:, 0]
+        freq = np.full(n, np.nan)
+        dn = np.diff(ncross)
+        dtl = np.diff(tlast)
+        ok = (dn > 0) & (dtl > 0)
+        freq[1:][ok] = dn[ok] / dtl[ok]
+        z = _state(X, "z")
+        omega = 2 * np.pi * np.where(np.isfinite(freq), freq, self.f_ref)
+        x_m, v = z[:, 0] * self.scale[0], z[:, 1] * self.scale[1]
+        amp_m = np.hypot(x_m, v / omega)
+        t_end = self.t_end
+        channels = dict(
+            time_s=t_end, temperature_C=np.asarray(scn.temperature(t_end), dtype=float),
+            rate_dps=rate_V / self.sf_nom, rate_V=rate_V, rate_true_dps=self.rate_end, quadrature_V=quad_V,
+            drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
+            drive_frequency_Hz=freq,
+        )
+        t_end_die = self.fx.die_temperature(t_end, np.asarray(scn.temperature(t_end), dtype=float))
+        internal = dict(drive_displacement_amplitude_m=amp_m, modulator_norm=_state(X, "n")[:, 0],
+                        die_temperature_C=t_end_die)
+        wall = time.perf_counter() - self.wall0
+        info = dict(engine="carrier", steps_per_cycle=self.spc, step_s=self.h, steps_per_sample=M,
+                    output_interval_s=self.dt_out, nominal_scale_factor_V_per_dps=self.sf_nom,
+                    compiled=roll.compiled, compile_s=roll.compile_s, wall_time_s=wall,
+                    simulated_time_s=float(t_end[-1]), operating_points=len(self.plans),
+                    phase_trim_rad=self.ref.phase_trim_rad)
+        meta = {"device": dev.name, "source": "simulation", "engine": "carrier", "scenario": scn.name,
+                "seed": str(scn.seed), "nominal_scale_factor_V_per_dps": f"{self.sf_nom:.9g}"}
+        return SimResult(channels, internal, info, meta)
+
+
+def _advance(group: list, roll, bar) -> None:
+    """Roll a group of units sharing steps per sample, sample count, call size and noise mode out together."""
+    u0 = group[0]
+    n, M, per_call = u0.n, u0.M, u0.per_call
+    for k0 in range(0, n, per_call):
+        k1 = min(n, k0 + per_call)
+        P = np.stack([u.params(k0, k1) for u in group])
+        x = np.stack([u.x for u in group])
+        steps = (k1 - k0) * M
+        if not u0.any_noise:
+            Xc = roll.units(x, P, np.zeros((len(group), steps, N_NOISE)), M)
+        elif roll.draws_noise:  # the compiled code draws the normals (xoshiro256+ and a ziggurat)
+            Xc = roll.units(x, P, None, M, seeds=[int(u.rng.integers(2 ** 63)) for u in group])
+        else:
+            Xc = roll.units(x, P, np.stack([u.rng.standard_normal((steps, N_NOISE)) for u in group]), M)
+        for u, Xu in zip(group, Xc):
+            u.X[k0:k1] = Xu
+            u.x = roll.continue_from(Xu[-1])
+        bar.update(len(group) * (k1 - k0))
+
+
+def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=None) -> list[SimResult]:
+    """Simulate many units at carrier level, advanced together in vectorised compiled calls.
+
+    Units that share the steps per output sample, the number of samples and the noise
+    switches run in one call per chunk (a population of one device design with different
+    tolerances, temperatures, rates or seeds usually does); the others in further groups.
+    Each unit's record is bit for bit what :func:`run_carrier` gives it alone.
+
+    Parameters
+    ----------
+    scns : list of Scenario
+        One scenario per unit.
+    progress : bool, optional
+        Show a progress bar on stderr (default: when the runs are expected to take > 3 s).
+    log : callable, optional
+        One-line messages (default: stderr).
+
+    Returns
+    -------
+    list of SimResult
+        In the order of ``scns``.
+    """
+    log = log or (lambda m: sys.stderr.write(m + "\n"))
+    units = [_Unit(scn) for scn in scns]
+    roll = load_rollout(CARRIER_MODEL, log, lanes=len(units) > 1)
+    groups: dict = {}
+    for u in units:
+        groups.setdefault((u.M, u.n, u.per_call, u.any_noise), []).append(u)
+    total = sum(u.n for u in units)
+    per_step_s = (100e-9 if len(units) == 1 else 60e-9) if roll.compiled else 1e-6
+    est_s = sum(u.n * u.M for u in units) * per_step_s + 0.04 * sum(
+        len(np.unique(u.keys)) for u in units)
+    show = progress if progress is not None else est_s > 3.0
+    desc = f"carrier {scns[0].name}" if len(units) == 1 else f"carrier x{len(units)}"
+    bar = tqdm(total=total, disable=not show, file=sys.stderr, unit="sample", desc=desc, mininterval=0.5)
+    for group in groups.values():
+        _advance(group, roll, bar)
+    bar.close()
+    return [u.result(roll) for u in units]
 
 
 def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimResult:
@@ -51,106 +251,4 @@ def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimRes
     -------
     SimResult
     """
-    log = log or (lambda m: sys.stderr.write(m + "\n"))
-    wall0 = time.perf_counter()
-    dev = scn.device
-    st = scn.settings["scenario"]
-    ref = build_diagram(dev, dev.reference_temperature_C)
-    f_ref = ref.resonator.f_drive_Hz
-    spc = int(st["steps_per_cycle"])
-    h = 1.0 / (spc * f_ref)
-    M = max(1, int(round(1.0 / (st["output_rate_Hz"] * h))))
-    dt_out = M * h
-    n = int(np.ceil(scn.duration_s / dt_out - 1e-9))
-    t_end = (np.arange(n) + 1) * dt_out
-    t_mid = t_end - dt_out / 2
-    case_mid = np.asarray(scn.temperature(t_mid), dtype=float)
-    fx = EffectSet(scn.effects)
-    temp = fx.die_temperature(t_mid, case_mid)
-    sig = fx.signals(t_mid, temp)
-    rate_dps = np.asarray(scn.rate(t_mid), dtype=float) + sig["rate_dps"]
-    rate_end = np.asarray(scn.rate(t_end), dtype=float)
-    vref_f = np.asarray(scn.vref_factor(t_mid), dtype=float)
-    rng = np.random.default_rng(scn.seed)
-    nz = scn.noise
-    # slow noises at the output rate, drawn first so they do not depend on call sizes
-    phase_flicker = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_phase_rad2"], rng)
-                     if nz["flicker"] else np.zeros(n))
-    sf_nom = scale_factor_V_per_dps(build_diagram(scn.device_nominal, dev.reference_temperature_C))
-    out_flicker_V = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng) * sf_nom
-                     if nz["flicker"] else np.zeros(n))
-    rrw_V = (noisegen.random_walk(n, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"], rng)
-             * sf_nom if nz["rate_random_walk"] else np.zeros(n))
-    noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
-    scale = ref.core_state_scale()
-    plans: dict[float, object] = {}
-    keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K  # operating points, cached per 1 mK
-
-    def plan_for(key):
-        key = float(key)
-        if key not in plans:
-            plans[key] = make_plan(build_diagram(dev, key), h, noise_on, scale)
-        return plans[key]
-
-    p0 = plan_for(keys[0])
-    x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
-                      from_steady=scn.settings["initial"]["state"] == "steady")
-    roll = load_rollout(CARRIER_MODEL, log)
-    per_call = max(1, int(round(CALL_S / dt_out)))
-    X = np.empty((n, STATE.size))
-    est_s = n * M * (110e-9 if roll.compiled else 1e-6) + 0.05 * len(np.unique(np.round(temp, 3)))
-    show = progress if progress is not None else est_s > 3.0
-    bar = tqdm(total=n, disable=not show, file=sys.stderr, unit="sample", desc=f"carrier {scn.name}",
-               mininterval=0.5)
-    trim = ref.phase_trim_rad
-    any_noise = nz["brownian"] or nz["electronic"]
-    for k0 in range(0, n, per_call):
-        k1 = min(n, k0 + per_call)
-        P = np.empty((k1 - k0, STATE_P))
-        uniq, inv = np.unique(keys[k0:k1], return_inverse=True)
-        for j, key in enumerate(uniq):
-            rows = np.flatnonzero(inv == j)
-            ks = rows + k0
-            P[rows] = plan_for(key).params(np.deg2rad(rate_dps[ks]), phase_flicker[ks], vref_f[ks], sig["quad_rel"][ks])
-        if not any_noise:
-            Xc = roll(x, P, np.zeros(((k1 - k0) * M, N_NOISE)), M)
-        elif roll.draws_noise:  # the compiled code draws the normals (xoshiro256+ and a ziggurat)
-            Xc = roll(x, P, None, M, seed=int(rng.integers(2 ** 63)))
-        else:
-            Xc = roll(x, P, rng.standard_normal(((k1 - k0) * M, N_NOISE)), M)
-        X[k0:k1] = Xc
-        x = roll.continue_from(Xc[-1])
-        bar.update(k1 - k0)
-    bar.close()
-    # --- record channels ---------------------------------------------------------------
-    lsb = dev.values["noise"]["quantization_lsb_V"] if nz["quantization"] else 0.0
-    # the DAQ integrates over each output interval (integrate-and-dump, no aliasing of the white noise)
-    rate_V = noisegen.quantize(_state(X, "acc_rate")[:, 0] / M + out_flicker_V + rrw_V, lsb)
-    quad_V = noisegen.quantize(_state(X, "acc_quad")[:, 0] / M, lsb)
-    ncross, tlast = _state(X, "ncross")[:, 0], _state(X, "tlast")[:, 0]
-    freq = np.full(n, np.nan)
-    dn = np.diff(ncross)
-    dtl = np.diff(tlast)
-    ok = (dn > 0) & (dtl > 0)
-    freq[1:][ok] = dn[ok] / dtl[ok]
-    z = _state(X, "z")
-    omega = 2 * np.pi * np.where(np.isfinite(freq), freq, f_ref)
-    x_m, v = z[:, 0] * scale[0], z[:, 1] * scale[1]
-    amp_m = np.hypot(x_m, v / omega)
-    channels = dict(
-        time_s=t_end, temperature_C=np.asarray(scn.temperature(t_end), dtype=float),
-        rate_dps=rate_V / sf_nom, rate_V=rate_V, rate_true_dps=rate_end, quadrature_V=quad_V,
-        drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
-        drive_frequency_Hz=freq,
-    )
-    t_end_die = fx.die_temperature(t_end, np.asarray(scn.temperature(t_end), dtype=float))
-    internal = dict(drive_displacement_amplitude_m=amp_m, modulator_norm=_state(X, "n")[:, 0],
-                    die_temperature_C=t_end_die)
-    wall = time.perf_counter() - wall0
-    info = dict(engine="carrier", steps_per_cycle=spc, step_s=h, steps_per_sample=M, output_interval_s=dt_out,
-                nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,
-                wall_time_s=wall, simulated_time_s=float(t_end[-1]), operating_points=len(plans),
-                phase_trim_rad=trim)
-    meta = {"device": dev.name, "source": "simulation", "engine": "carrier", "scenario": scn.name,
-            "seed": str(scn.seed), "nominal_scale_factor_V_per_dps": f"{sf_nom:.9g}"}
-    return SimResult(channels, internal, info, meta)
+    return run_carrier_units([scn], progress=progress, log=log)[0]
