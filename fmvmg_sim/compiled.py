@@ -141,25 +141,25 @@ EXPORT int PREFIX_normals_c(uint64_t seed, long n, double* out) {
 }
 /* Roll L units of the step function out together. K parameter blocks; each block holds NOB outputs of MO
    steps. Arrays are unit-minor (structure of arrays): x0[NX][L]; P[K][NP][L]; W[K*NOB*MO][NW][L] per-step
-   inputs, or NULL to draw NW standard normals per step and unit from that unit's seed seeds[L];
-   X[K*NOB][NX][L] receives the state after each output's last step. Returns 0, -1 if out of memory, -2 if
-   L > 1 for a model built without lanes (LANES 0). */
+   inputs, or NULL to draw NW standard normals per step and unit, each unit's generator seeded afresh every
+   SB blocks from seeds[ceil(K/SB)][L]; X[K*NOB][NX][L] receives the state after each output's last step.
+   Returns 0, -1 if out of memory, -2 if L > 1 for a model built without lanes (LANES 0). */
 EXPORT int PREFIX_rollout_c(long L, const double* x0, const double* P, const double* W, double* X,
-                            long MO, long K, long NOB, const uint64_t* seeds) {
+                            long MO, long K, long NOB, const uint64_t* seeds, long SB) {
   if (L > 1 && !LANES) return -2;
   double* xa = (double*) malloc(sizeof(double) * NX * L);
   double* xb = (double*) malloc(sizeof(double) * NX * L);
   double* wb = (double*) malloc(sizeof(double) * (NW > 0 ? NW : 1) * L);
   PREFIX_rng* r = (PREFIX_rng*) malloc(sizeof(PREFIX_rng) * L);
   if (!xa || !xb || !wb || !r) { free(xa); free(xb); free(wb); free(r); return -1; }
-  if (!W) {
-    if (!PREFIX_zinit) PREFIX_zig_init();
-    for (long l = 0; l < L; ++l) PREFIX_seed(r + l, seeds[l]);
-  }
+  if (!W && !PREFIX_zinit) PREFIX_zig_init();
+  if (SB < 1) SB = K > 0 ? K : 1;
   memcpy(xa, x0, sizeof(double) * NX * L);
   long s = 0;
   for (long k = 0; k < K; ++k) {
     const double* p = P + k * NP * L;
+    if (!W && k % SB == 0)
+      for (long l = 0; l < L; ++l) PREFIX_seed(r + l, seeds[(k / SB) * L + l]);
     for (long o = 0; o < NOB; ++o) {
       for (long m = 0; m < MO; ++m, ++s) {
         const double* w;
@@ -391,22 +391,26 @@ class Rollout:
                           seeds=[seed])[0]
 
     def units(self, x0: np.ndarray, P: np.ndarray, W: np.ndarray | None, steps_per_output: int,
-              outputs_per_block: int = 1, seeds=None) -> np.ndarray:
-        """Run ``L`` units of the model together, each with its own parameters, inputs and seed.
+              outputs_per_block: int = 1, seeds=None, blocks_per_seed: int | None = None) -> np.ndarray:
+        """Run ``L`` units of the model together, each with its own parameters, inputs and seeds.
 
         Unit ``u``'s result equals what a call with ``x0[u]``, ``P[u]``, ``W[u]`` and ``seeds[u]`` alone
-        gives, bit for bit.
+        gives, bit for bit; and a call over several seed blocks equals one call per block, each
+        continued from the last (:meth:`continue_from`).
 
         Parameters
         ----------
         x0 : ndarray, shape (L, n_x)
         P : ndarray, shape (L, K, n_p)
         W : ndarray, shape (L, K * outputs_per_block * steps_per_output, n_w), or None
-            Per-step inputs; ``None`` lets the compiled code draw each unit's as standard normals from its seed.
+            Per-step inputs; ``None`` lets the compiled code draw each unit's as standard normals from its seeds.
         steps_per_output : int
         outputs_per_block : int, optional
-        seeds : sequence of int, optional
-            One seed per unit (used when ``W`` is None).
+        seeds : array-like of int, shape (L,) or (L, ceil(K / blocks_per_seed)), optional
+            Generator seeds per unit (used when ``W`` is None): the generator starts afresh from the next
+            seed every ``blocks_per_seed`` parameter blocks.
+        blocks_per_seed : int, optional
+            Default: all ``K`` blocks from one seed.
 
         Returns
         -------
@@ -425,13 +429,15 @@ class Rollout:
             raise ValueError(f"W has shape {np.shape(W)}, expected {(L, K * nob * Mo, nw)}")
         if not self.compiled:
             return np.stack([self._vm_one(x0[u], P[u], np.asarray(W[u], dtype=float), Mo, nob) for u in range(L)])
-        seeds = np.zeros(L, dtype=np.uint64) if seeds is None else np.array(
-            [int(s) % 2 ** 64 for s in seeds], dtype=np.uint64)
-        if seeds.shape != (L,):
-            raise ValueError(f"{seeds.size} seeds for {L} units")
+        sb = K if blocks_per_seed is None else max(1, int(blocks_per_seed))
+        n_seed = max(1, -(-K // sb))
+        seeds = np.zeros((L, n_seed), dtype=np.uint64) if seeds is None else np.array(
+            [[int(v) % 2 ** 64 for v in np.atleast_1d(row)] for row in seeds], dtype=np.uint64).reshape(L, -1)
+        if seeds.shape != (L, n_seed):
+            raise ValueError(f"seeds have shape {seeds.shape}, expected {(L, n_seed)}")
         if L > 1 and not self.lanes:  # built without the vectorised path: one unit after the other
             return np.stack([self.units(x0[u:u + 1], P[u:u + 1], None if W is None else W[u:u + 1], Mo, nob,
-                                        seeds=seeds[u:u + 1])[0] for u in range(L)])
+                                        seeds=seeds[u:u + 1], blocks_per_seed=sb)[0] for u in range(L)])
         # unit-minor (structure of arrays) for the compiled lanes; a no-op copy for one unit
         xs = np.ascontiguousarray(x0.T)
         Ps = np.ascontiguousarray(P.transpose(1, 2, 0))
@@ -442,9 +448,10 @@ class Rollout:
         else:
             Ws = np.ascontiguousarray(np.asarray(W, dtype=float).transpose(1, 2, 0))
             wp = Ws.ctypes.data_as(dp)
+        seeds_t = np.ascontiguousarray(seeds.T)  # [seed block][unit]
         rc = self._fn(ctypes.c_long(L), xs.ctypes.data_as(dp), Ps.ctypes.data_as(dp), wp, X.ctypes.data_as(dp),
                       ctypes.c_long(Mo), ctypes.c_long(K), ctypes.c_long(nob),
-                      seeds.ctypes.data_as(ctypes.POINTER(ctypes.c_uint64)))
+                      seeds_t.ctypes.data_as(ctypes.POINTER(ctypes.c_uint64)), ctypes.c_long(sb))
         if rc != 0:
             raise MemoryError(f"the compiled roll-out could not allocate its work arrays for {L} units")
         return X.transpose(2, 0, 1)
@@ -609,7 +616,7 @@ def load_rollout(model: StepModel, log=None, lanes: bool = False) -> Rollout:
     fn = getattr(cdll, f"{model.name}_rollout_c")
     dp = ctypes.POINTER(ctypes.c_double)
     fn.argtypes = [ctypes.c_long, dp, dp, dp, dp, ctypes.c_long, ctypes.c_long, ctypes.c_long,
-                   ctypes.POINTER(ctypes.c_uint64)]
+                   ctypes.POINTER(ctypes.c_uint64), ctypes.c_long]
     fn.restype = ctypes.c_int
     normals = getattr(cdll, f"{model.name}_normals_c")
     normals.argtypes = [ctypes.c_uint64, ctypes.c_long, dp]

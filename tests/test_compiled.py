@@ -78,3 +78,24 @@ def test_units_advanced_together_match_each_unit_alone():
     assert np.array_equal(single.units(x0, P, W, M), given)
     # different temperatures really are different units
     assert not np.allclose(together[0], together[4])
+
+
+def test_one_call_over_seed_blocks_equals_one_call_per_block(roll):
+    """The engine hands many noise chunks (one seed each) to one call: the same numbers as a call per chunk."""
+    from fmvmg_sim.carrier.plan import initial_state, make_plan
+    from fmvmg_sim.diagram import build_diagram
+    from fmvmg_sim.device import load_device
+
+    dev = load_device("fmvmg_a")
+    ref = build_diagram(dev, 25.0)
+    plan = make_plan(ref, 1.0 / (32 * ref.resonator.f_drive_Hz), None, ref.core_state_scale())
+    x = initial_state(plan, from_steady=True)
+    P = plan.params(np.deg2rad(np.arange(7) * 10.0))
+    seeds = [101, 202, 303]
+    whole = roll.units(x[None], P[None], None, 150, seeds=[seeds], blocks_per_seed=3)[0]
+    parts = []
+    for j, s in enumerate(seeds):
+        Xp = roll(x, P[3 * j:3 * j + 3], None, 150, seed=s)
+        parts.append(Xp)
+        x = roll.continue_from(Xp[-1])
+    assert np.array_equal(whole, np.concatenate(parts))

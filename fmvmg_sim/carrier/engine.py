@@ -37,8 +37,10 @@ STATE_P = PARAMS.size
 
 #: Temperatures are rounded to this step (K) when caching discretised operating points.
 T_QUANTUM_K = 1e-3
-#: Target number of simulated seconds per compiled call (progress-bar granularity).
+#: Simulated seconds per chunk: each chunk's noise comes from its own seed (records depend on it).
 CALL_S = 0.02
+#: Simulated seconds per compiled call (progress-bar granularity; records do not depend on it).
+BATCH_S = 0.5
 #: Operating points kept across runs in one process (a few kB each).
 PLAN_CACHE_SIZE = 512
 
@@ -60,6 +62,24 @@ def _one_blas_thread():
     except ImportError:  # pragma: no cover - threadpoolctl is a dependency
         return nullcontext()
     return threadpool_limits(limits=1, user_api="blas")
+
+
+def _device_id(dev) -> str:
+    """A content key of a device's values (plans and scale factors are cached under it)."""
+    return json.dumps(dev.values, sort_keys=True, default=repr)
+
+
+_SCALE_FACTORS: OrderedDict = OrderedDict()
+
+
+def _nominal_scale_factor(dev) -> float:
+    """The averaged model's scale factor of ``dev`` at its reference temperature (V per deg/s), cached."""
+    key = _device_id(dev)
+    if key not in _SCALE_FACTORS:
+        _SCALE_FACTORS[key] = scale_factor_V_per_dps(build_diagram(dev, dev.reference_temperature_C))
+        while len(_SCALE_FACTORS) > PLAN_CACHE_SIZE:
+            _SCALE_FACTORS.popitem(last=False)
+    return _SCALE_FACTORS[key]
 
 
 class _Unit:
@@ -91,7 +111,7 @@ class _Unit:
         # slow noises at the output rate, drawn first so they do not depend on call sizes
         self.phase_flicker = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_phase_rad2"], rng)
                               if nz["flicker"] else np.zeros(n))
-        sf_nom = self.sf_nom = scale_factor_V_per_dps(build_diagram(scn.device_nominal, dev.reference_temperature_C))
+        sf_nom = self.sf_nom = _nominal_scale_factor(scn.device_nominal)
         self.out_flicker_V = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng)
                               * sf_nom if nz["flicker"] else np.zeros(n))
         self.rrw_V = (noisegen.random_walk(n, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"],
@@ -101,7 +121,7 @@ class _Unit:
         self.scale = ref.core_state_scale()
         self.keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K  # operating points, cached per 1 mK
         self.plans: dict = {}
-        self._device_id = json.dumps(dev.values, sort_keys=True, default=repr)
+        self._device_id = _device_id(dev)
         self.per_call = max(1, int(round(CALL_S / dt_out)))
         p0 = self.plan_for(self.keys[0])
         self.x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
@@ -175,20 +195,30 @@ class _Unit:
 
 
 def _advance(group: list, roll, bar) -> None:
-    """Roll a group of units sharing steps per sample, sample count, call size and noise mode out together."""
+    """Roll a group of units sharing steps per sample, sample count, chunk size and noise mode out together.
+
+    The noise generator of each unit starts from a fresh seed every chunk of ``per_call`` samples (the
+    unit's record does not depend on how many chunks one compiled call covers); a call covers about
+    :data:`BATCH_S` simulated seconds.
+    """
     u0 = group[0]
     n, M, per_call = u0.n, u0.M, u0.per_call
-    for k0 in range(0, n, per_call):
-        k1 = min(n, k0 + per_call)
+    chunks = max(1, int(round(BATCH_S / CALL_S)))
+    for k0 in range(0, n, per_call * chunks):
+        k1 = min(n, k0 + per_call * chunks)
         P = np.stack([u.params(k0, k1) for u in group])
         x = np.stack([u.x for u in group])
         steps = (k1 - k0) * M
         if not u0.any_noise:
             Xc = roll.units(x, P, np.zeros((len(group), steps, N_NOISE)), M)
         elif roll.draws_noise:  # the compiled code draws the normals (xoshiro256+ and a ziggurat)
-            Xc = roll.units(x, P, None, M, seeds=[int(u.rng.integers(2 ** 63)) for u in group])
+            n_chunks = -(-(k1 - k0) // per_call)
+            seeds = [[int(u.rng.integers(2 ** 63)) for _ in range(n_chunks)] for u in group]
+            Xc = roll.units(x, P, None, M, seeds=seeds, blocks_per_seed=per_call)
         else:
-            Xc = roll.units(x, P, np.stack([u.rng.standard_normal((steps, N_NOISE)) for u in group]), M)
+            W = np.stack([np.concatenate([u.rng.standard_normal(((min(k1, c + per_call) - c) * M, N_NOISE))
+                                          for c in range(k0, k1, per_call)]) for u in group])
+            Xc = roll.units(x, P, W, M)
         for u, Xu in zip(group, Xc):
             u.X[k0:k1] = Xu
             u.x = roll.continue_from(Xu[-1])
