@@ -41,6 +41,8 @@ T_QUANTUM_K = 1e-3
 CALL_S = 0.02
 #: Simulated seconds per compiled call (progress-bar granularity; records do not depend on it).
 BATCH_S = 0.5
+#: Smallest group of units advanced in vectorised packs (smaller groups run one unit after the other).
+MIN_PACKED_UNITS = 3
 #: Operating points kept across runs in one process (a few kB each).
 PLAN_CACHE_SIZE = 512
 
@@ -203,6 +205,8 @@ def _advance(group: list, roll, bar) -> None:
     """
     u0 = group[0]
     n, M, per_call = u0.n, u0.M, u0.per_call
+    for u in group:
+        u.roll = roll
     chunks = max(1, int(round(BATCH_S / CALL_S)))
     for k0 in range(0, n, per_call * chunks):
         k1 = min(n, k0 + per_call * chunks)
@@ -230,8 +234,9 @@ def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=No
 
     Units that share the steps per output sample, the number of samples and the noise
     switches run in one call per chunk (a population of one device design with different
-    tolerances, temperatures, rates or seeds usually does); the others in further groups.
-    Each unit's record is bit for bit what :func:`run_carrier` gives it alone.
+    tolerances, temperatures, rates or seeds usually does), in packs of
+    :data:`fmvmg_sim.compiled.LANE_WIDTH` lanes vectorised across units; the others in
+    further groups. Each unit's record is bit for bit what :func:`run_carrier` gives it alone.
 
     Parameters
     ----------
@@ -249,10 +254,13 @@ def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=No
     """
     log = log or (lambda m: sys.stderr.write(m + "\n"))
     units = [_Unit(scn) for scn in scns]
-    roll = load_rollout(CARRIER_MODEL, log, lanes=len(units) > 1)
     groups: dict = {}
     for u in units:
         groups.setdefault((u.M, u.n, u.per_call, u.any_noise), []).append(u)
+    roll = load_rollout(CARRIER_MODEL, log)
+    # a pack of lanes costs about 1.8 units' time: worth it from three units on
+    packed = (load_rollout(CARRIER_MODEL, log, lanes=True)
+              if any(len(g) >= MIN_PACKED_UNITS for g in groups.values()) else roll)
     total = sum(u.n for u in units)
     per_step_s = (100e-9 if len(units) == 1 else 60e-9) if roll.compiled else 1e-6
     est_s = sum(u.n * u.M for u in units) * per_step_s + 0.04 * sum(
@@ -261,9 +269,9 @@ def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=No
     desc = f"carrier {scns[0].name}" if len(units) == 1 else f"carrier x{len(units)}"
     bar = tqdm(total=total, disable=not show, file=sys.stderr, unit="sample", desc=desc, mininterval=0.5)
     for group in groups.values():
-        _advance(group, roll, bar)
+        _advance(group, packed if len(group) >= MIN_PACKED_UNITS else roll, bar)
     bar.close()
-    return [u.result(roll) for u in units]
+    return [u.result(u.roll) for u in units]
 
 
 def run_carrier(scn: Scenario, progress: bool | None = None, log=None) -> SimResult:
