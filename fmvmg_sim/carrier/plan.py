@@ -104,14 +104,12 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
     kx = dg.resonator.duffing_stiffness(ss.amplitude_m)  # Duffing: describing-function stiffness at the amplitude
     core0 = dg.core_system(g0, 0.0, kx)
     core_g = dg.core_system(g0 + 1.0, 0.0, kx)
-    core_w = dg.core_system(g0, 1.0, kx)
-    core_q = dg.core_system(g0, 0.0, kx, 1.0)
     S = dg.core_state_scale() if scale is None else np.asarray(scale, dtype=float)
     Sinv = 1.0 / S
     A0 = Sinv[:, None] * np.asarray(core0.A) * S[None, :]
     Ag = Sinv[:, None] * (np.asarray(core_g.A) - np.asarray(core0.A)) * S[None, :]
-    Aw = Sinv[:, None] * (np.asarray(core_w.A) - np.asarray(core0.A)) * S[None, :]
-    Aq = Sinv[:, None] * (np.asarray(core_q.A) - np.asarray(core0.A)) * S[None, :]
+    Aw = Sinv[:, None] * _resonator_direction(dg, core0, kx, 1.0, 0.0) * S[None, :]
+    Aq = Sinv[:, None] * _resonator_direction(dg, core0, kx, 0.0, 1.0) * S[None, :]
     B = Sinv[:, None] * np.asarray(core0.B)
     C = np.asarray(core0.C) * S[None, :]
     D = np.asarray(core0.D)
@@ -150,6 +148,30 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
     return OperatingPlan(base=base, phi_rate=Phi_w, phi_quad=Phi_q, k_quad_N_per_m=dg.resonator.k_quad_N_per_m,
                          trim_rad=dg.phase_trim_rad, scale=S, steady=ss,
                          C_x=C[idx["x"]], C_y=C[idx["y"]], A_core=A0)
+
+
+def _resonator_direction(dg: Diagram, core0, kx: float, rate_rad_s: float, dk_quad_N_per_m: float) -> np.ndarray:
+    """Change of the core's state matrix per unit of rate or of quadrature stiffness.
+
+    Both act inside the resonator only (its state matrix is affine in them, and no other block
+    feeds the entries they touch), so the change is the resonator's own, placed at its states in
+    the core: the same numbers as differencing two interconnected cores, without building them.
+    """
+    res = dg.resonator
+    R0 = res.state_matrix(0.0, kx)
+    R1 = res.state_matrix(rate_rad_s, kx)
+    if dk_quad_N_per_m:
+        R1 = R1.copy()
+        R1[1, 2] -= dk_quad_N_per_m / res.m_drive_kg
+        R1[3, 0] -= dk_quad_N_per_m / res.m_sense_kg
+    labels = list(core0.state_labels)
+    names = [f"resonator_{s}" for s in res.linear_model().state_labels]
+    if not set(names) <= set(labels):
+        raise RuntimeError(f"the core's states {labels} do not name the resonator's {names}")
+    idx = [labels.index(n) for n in names]
+    out = np.zeros_like(np.asarray(core0.A, dtype=float))
+    out[np.ix_(idx, idx)] = R1 - R0
+    return out
 
 
 def initial_state(plan: OperatingPlan, drive_displacement_m: float = 10e-9, from_steady: bool = False) -> np.ndarray:
