@@ -182,8 +182,8 @@ EXPORT int PREFIX_rollout_c(long L, const double* x0, const double* P, const dou
           const double* w;
           if (W) w = W + s * NW * L + q * NW * vw;
           else {
-            for (long l = 0; l < vw; ++l)
-              for (int j = 0; j < NW; ++j) wb[j * vw + l] = PREFIX_normal(r + l);
+            for (int j = 0; j < NW; ++j)  /* lanes interleaved: their generators' chains overlap */
+              for (long l = 0; l < vw; ++l) wb[j * vw + l] = PREFIX_normal(r + l);
             w = wb;
           }
 #if LANES
