@@ -639,7 +639,8 @@ def load_rollout(model: StepModel, log=None, lanes: bool = False) -> Rollout:
                 _WARNED = True
             return Rollout(model, None, compiled=False)
         compile_s = time.perf_counter() - t0
-        log(f"fmvmg: compiled the {model.name} step function in {compile_s:.1f} s (cached in {lib.parent})")
+        what = f"the {model.name} step function" + (" in packs of lanes" if lanes else "")
+        log(f"fmvmg: compiled {what} in {compile_s:.1f} s (cached in {lib.parent})")
     cdll = ctypes.CDLL(str(lib))
     fn = getattr(cdll, f"{model.name}_rollout_c")
     dp = ctypes.POINTER(ctypes.c_double)
