@@ -222,6 +222,15 @@ _BINARY = {
 _OPS = {getattr(ca, n): n for n in dir(ca) if n.startswith("OP_")}
 
 
+def _c_literal(v: float) -> str:
+    """An exact C literal of ``v`` (hexadecimal floating point; the math.h macros for inf and nan)."""
+    if np.isnan(v):
+        return "NAN"
+    if np.isinf(v):
+        return "INFINITY" if v > 0 else "(-INFINITY)"
+    return v.hex()
+
+
 def _step_c(model: "StepModel") -> str:
     """The model's step as an inline C function of one lane (unit ``l`` of ``L``, unit-minor arrays)."""
     f = model.casadi_function()
@@ -235,7 +244,7 @@ def _step_c(model: "StepModel") -> str:
         elif op == "OP_OUTPUT":
             body.append(f"  y[{o[1]}*L+l]=w{i[0]};")
         elif op == "OP_CONST":
-            body.append(f"  w{o[0]}={float(f.instruction_constant(k)).hex()};")
+            body.append(f"  w{o[0]}={_c_literal(float(f.instruction_constant(k)))};")
         elif op in _UNARY:
             body.append(f"  w{o[0]}={_UNARY[op].format(f'w{i[0]}')};")
         elif op in _BINARY:
