@@ -17,9 +17,10 @@ The arithmetic of each unit is the expression graph's, operation by operation, s
 unit gives the same numbers alone or among others.
 
 Libraries are cached under ``$FMVMG_CACHE_DIR`` (default ``~/.cache/fmvmg_sim``),
-keyed by a hash of the C source, the compiler command and the CPU. Each library has a
-``.sha256`` file beside it; an entry is loaded only after its content matches, and a
-bad entry (truncated, altered, missing its hash) is rebuilt with one warning line.
+keyed by a hash of the C source, the compiler command and the CPU; the file name also
+carries the SHA-256 of the library itself, written in one atomic rename. An entry is
+loaded only after its content matches that hash; a bad entry (truncated, altered) is
+removed and rebuilt with one warning line.
 The first run pays the compile (a few seconds), later runs load the library. Without a
 working C compiler the same roll-out runs in CasADi's virtual machine (several times
 slower) and the engine says so once.
@@ -532,6 +533,8 @@ def cache_dir() -> Path:
 
 
 _SOURCES: dict[tuple, bytes] = {}
+#: Hex digits of the library's SHA-256 carried in its file name.
+_DIGEST_CHARS = 16
 
 
 def c_source(model: StepModel, lanes: bool = False) -> bytes:
@@ -567,40 +570,49 @@ def _digest(path: Path) -> str:
     return h.hexdigest()
 
 
-def _entry_ok(lib: Path) -> bool | None:
-    """Whether the cached library ``lib`` matches its recorded content hash (None: no entry at all)."""
-    side = lib.with_name(lib.name + ".sha256")
-    if not lib.exists() and not side.exists():
-        return None
-    try:
-        return side.read_text().split()[0] == _digest(lib)
-    except (OSError, IndexError):
-        return False
+def _cached(prefix: str, log) -> Path | None:
+    """A cached library ``<prefix>_<digest>.so`` whose content matches the digest in its name.
 
-
-def _build(cc_path: str, src: bytes, lib: Path, name: str) -> str | None:
-    """Compile ``src`` into the cache entry ``lib`` (library, then its hash, each renamed into place).
-
-    Returns None on success, else the compiler's message.
+    Entries that do not match (truncated, altered) are reported in one line and removed.
     """
-    lib.parent.mkdir(parents=True, exist_ok=True)
+    root = cache_dir()
+    for lib in sorted(root.glob(f"{prefix}_*.so")):
+        want = lib.stem.rsplit("_", 1)[-1]
+        try:
+            ok = _digest(lib)[:len(want)] == want and len(want) == _DIGEST_CHARS
+        except OSError:
+            ok = False
+        if ok:
+            return lib
+        log(f"fmvmg: cached library {lib} failed its content check (truncated or altered); rebuilding it")
+        try:
+            lib.unlink()
+        except OSError:
+            pass
+    return None
+
+
+def _build(cc_path: str, src: bytes, prefix: str, name: str) -> tuple[Path | None, str | None]:
+    """Compile ``src`` into the cache as ``<prefix>_<digest of the library>.so`` (one atomic rename).
+
+    Returns (path, None) on success, else (None, the compiler's message).
+    """
+    root = cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         cpath = Path(tmp) / f"{name}.c"
         cpath.write_bytes(src)
-        tmp_lib = lib.parent / f".{lib.name}.{os.getpid()}.tmp"
+        tmp_lib = root / f".{prefix}.{os.getpid()}.tmp"
         res = subprocess.run([cc_path, *CFLAGS, str(cpath), "-o", str(tmp_lib), "-lm"], capture_output=True, text=True)
         if res.returncode != 0:  # a compiler without -march=native: portable flags
             res = subprocess.run([cc_path, *FALLBACK_CFLAGS, str(cpath), "-o", str(tmp_lib), "-lm"],
                                  capture_output=True, text=True)
         if res.returncode != 0:
             tmp_lib.unlink(missing_ok=True)
-            return res.stderr.strip()[:200]
-        digest = _digest(tmp_lib)
-        tmp_side = lib.parent / f".{lib.name}.sha256.{os.getpid()}.tmp"
-        tmp_side.write_text(digest + "\n")
+            return None, res.stderr.strip()[:200]
+        lib = root / f"{prefix}_{_digest(tmp_lib)[:_DIGEST_CHARS]}.so"
         os.replace(tmp_lib, lib)
-        os.replace(tmp_side, lib.with_name(lib.name + ".sha256"))
-    return None
+    return lib, None
 
 
 def load_rollout(model: StepModel, log=None, lanes: bool = False) -> Rollout:
@@ -634,15 +646,13 @@ def load_rollout(model: StepModel, log=None, lanes: bool = False) -> Rollout:
         return Rollout(model, None, compiled=False)
     src = c_source(model, lanes)
     key = hashlib.sha256(src + " ".join([cc] + CFLAGS).encode() + _cpu_id().encode()).hexdigest()[:20]
-    lib = cache_dir() / f"{model.name}{'_lanes' if lanes else ''}_{key}.so"
+    prefix = f"{model.name}{'_lanes' if lanes else ''}_{key}"
     compile_s = 0.0
-    ok = _entry_ok(lib)
-    if ok is not True:
-        if ok is False:
-            log(f"fmvmg: cached library {lib} failed its content check (truncated or altered); rebuilding it")
+    lib = _cached(prefix, log)
+    if lib is None:
         t0 = time.perf_counter()
-        err = _build(cc_path, src, lib, model.name)
-        if err is not None:
+        lib, err = _build(cc_path, src, prefix, model.name)
+        if lib is None:
             if not _WARNED:
                 log(f"fmvmg: C compile failed ({err}); the engines run in CasADi's virtual machine (slower)")
                 _WARNED = True

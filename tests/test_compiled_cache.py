@@ -65,18 +65,15 @@ def test_good_entry_is_loaded_without_a_rebuild(cache):
     assert _expected_output(again) == "[[0.125, 1.75]]"
 
 
-@pytest.mark.parametrize("damage", ["truncate", "alter", "drop_hash", "empty"])
+@pytest.mark.parametrize("damage", ["truncate", "alter", "empty"])
 def test_bad_entry_is_rebuilt_with_one_warning_line(cache, damage):
     lib = _library(cache)
-    side = lib.with_name(lib.name + ".sha256")
     data = lib.read_bytes()
     if damage == "truncate":  # what a crash or a full disk leaves; loading it used to end in a bus error
         lib.write_bytes(data[: len(data) // 2])
     elif damage == "alter":
         mid = len(data) // 2
         lib.write_bytes(data[:mid] + bytes([data[mid] ^ 0xFF]) + data[mid + 1:])
-    elif damage == "drop_hash":
-        side.unlink()
     else:
         lib.write_bytes(b"")
     res = _run(cache)
@@ -84,15 +81,13 @@ def test_bad_entry_is_rebuilt_with_one_warning_line(cache, damage):
     warnings = [ln for ln in res.stderr.splitlines() if "failed its content check" in ln]
     assert len(warnings) == 1 and str(lib) in warnings[0]
     assert _expected_output(res) == "[[0.125, 1.75]]"
-    assert lib.read_bytes() == data or len(lib.read_bytes()) > 0
-    assert side.exists()
+    assert _library(cache).read_bytes() == data  # the same build again, under the same name
     quiet = _run(cache)  # the rebuilt entry passes its check
     assert quiet.returncode == 0 and quiet.stderr == ""
 
 
-def test_hash_file_names_the_library_content(cache):
+def test_library_name_carries_its_content_hash(cache):
     import hashlib
     lib = _library(cache)
-    side = lib.with_name(lib.name + ".sha256")
-    assert side.read_text().split()[0] == hashlib.sha256(lib.read_bytes()).hexdigest()
+    assert hashlib.sha256(lib.read_bytes()).hexdigest().startswith(lib.stem.rsplit("_", 1)[-1])
     assert not list(cache.glob(".*.tmp"))  # no temporary files left behind
