@@ -72,6 +72,43 @@ def test_bad_set_override_exits_2(make_scenario, tmp_path, capsys):
     assert main(["run", str(tmp_path / "missing.toml")]) == 2
 
 
+@pytest.mark.parametrize("override, key", [
+    ("circuit.pi.kp=fast", "circuit.pi.kp"),                      # a circuit value (validated with the device)
+    ("device.mechanics.q_drive=-5", "device.mechanics.q_drive"),  # a device value
+    ("scenario.duration_s=-1", "scenario.duration_s"),            # a scenario value
+    ("temperature.segments=[{hold_s=-3}]", "temperature.segments[0].hold_s"),  # inside a profile
+    ("effects.thermal_lag.tau_s=1e9", "effects.thermal_lag.tau_s"),            # an effect parameter
+    ("scenario.device_file=nope", "scenario.device_file"),
+])
+def test_a_bad_set_is_blamed_on_the_set_argument_not_the_scenario_file(make_scenario, tmp_path, capsys,
+                                                                        override, key):
+    path = make_scenario()
+    assert main(["run", str(path), "--set", "scenario.seed=3", "--set", override, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"fmvmg: error: --set {override}: {key}: "), err
+    assert str(path) not in err
+
+
+def test_a_bad_value_in_the_file_is_still_blamed_on_the_file(make_scenario, tmp_path, capsys):
+    path = make_scenario(body="[circuit.pi]\nkp = -1\n")
+    assert main(["run", str(path), "--set", "circuit.pi.ki_per_s=100", "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: " in err and "circuit.pi.kp" in err and "--set" not in err
+
+
+def test_a_folder_given_as_the_scenario_is_named_as_such(tmp_path, capsys):
+    assert main(["run", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+
+
+def test_a_shipped_scenario_runs_by_name(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "startup", "--set", "scenario.duration_s=0.02", "--no-plots", "--json", "-o", "o"]) == 0
+    assert json.loads(capsys.readouterr().out)["simulated_time_s"] == pytest.approx(0.02, abs=1e-3)
+    assert main(["run", "no_such_scenario"]) == 2
+    assert "shipped scenarios: " in capsys.readouterr().err
+
+
 def test_a_loop_that_cannot_reach_its_setpoint_is_reported(make_scenario, tmp_path, capsys):
     path = make_scenario(duration_s=0.3, state="rest")
     assert main(["run", str(path), "-o", str(tmp_path / "o"), "--json", "--no-plots",

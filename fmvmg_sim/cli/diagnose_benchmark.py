@@ -59,11 +59,12 @@ def main(args) -> int:
     from ..diagnosis.benchmark import run_benchmark
     from ..diagnosis.cases import CaseMix, MixError
     from ..errors import InputError
+    from ..paths import resolve_scenario
     if args.cases < 1:
         raise InputError("must be >= 1", "--cases")
     if args.duration_h * 3600 < 3600:
         raise InputError("cases must be at least 1 h long (training plus held-out windows)", "--duration-h")
-    scn = args.scenario or str(Path(__file__).resolve().parents[2] / "scenarios" / "nominal_a.toml")
+    scn = str(resolve_scenario(args.scenario or "nominal_a"))
     if not Path(scn).is_file():
         raise InputError("file not found", scn)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()] if args.effects is not None else None
