@@ -1,6 +1,7 @@
 """``fmvmg run`` as a user runs it: outputs, bad scenarios (exit 2), loop failures reported, not crashed."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -126,3 +127,24 @@ def test_a_loop_that_never_starts_is_reported(make_scenario, tmp_path, capsys):
                  "--set", "circuit.drive_amp.gain=-2.0"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["status"] == "no_oscillation"
+
+
+@pytest.mark.parametrize("scenario, overrides, expected", [
+    ("startup", ["scenario.duration_s=0.05"], "startup: drive loop start-up"),
+    ("oven_004", ["scenario.duration_s=7200", "scenario.output_rate_Hz=1"],
+     "oven_004: drive amplitude loop over 2 h (started at its steady state)"),
+])
+def test_the_drive_loop_plot_is_titled_for_what_it_shows(tmp_path, monkeypatch, capsys, scenario, overrides,
+                                                         expected):
+    import fmvmg_sim.plots as plots
+    titles = {}
+    real = plots.save_figure
+
+    def spy(fig, path):
+        titles[Path(path).name] = fig.axes[0].get_title()
+        real(fig, path)
+
+    monkeypatch.setattr(plots, "save_figure", spy)
+    sets = [a for o in overrides for a in ("--set", o)]
+    assert main(["run", scenario, *sets, "-o", str(tmp_path / "o"), "--no-progress"]) == 0
+    assert titles["startup.png"] == expected

@@ -59,6 +59,7 @@ def main(args) -> int:
     from ..diagnosis.benchmark import run_benchmark
     from ..diagnosis.cases import CaseMix, MixError
     from ..errors import InputError
+    from ..output import OutputFolder
     from ..paths import resolve_scenario
     if args.cases < 1:
         raise InputError("must be >= 1", "--cases")
@@ -84,8 +85,11 @@ def main(args) -> int:
             stored_cases(cases_from)
         except ValueError as exc:
             raise InputError(str(exc), "--cases-from") from None
+    # written in place (the labels name their cases' paths), the previous run put back if this one fails
+    staged = OutputFolder(args.out, command="diagnose-benchmark", in_place=True)
     sc = run_benchmark(args.cases, args.seed, Path(args.out), scn, args.scheduler, args.duration_h * 3600.0,
                        args.rate_hz, args.null_runs, args.workers, progress=True, mix=mix, cases_from=cases_from)
+    staged.commit()
     slim = {k: v for k, v in sc.items() if k != "rows"}
     if args.json:
         sys.stdout.write(json.dumps(slim, default=float) + "\n")
