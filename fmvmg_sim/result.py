@@ -27,12 +27,15 @@ class SimResult:
         Engine, timings, steps per cycle, nominal scale factor, analytic predictions.
     metadata : dict
         ``# key: value`` lines for the record file.
+    summary : dict
+        What ``summary.json`` holds (filled by :func:`fmvmg_sim.simulate`; empty from an engine).
     """
 
     channels: dict
     internal: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
 
     @property
     def time_s(self) -> np.ndarray:
