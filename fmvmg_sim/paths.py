@@ -98,11 +98,12 @@ def resolve_scenario(path: str | Path) -> Path:
     Returns
     -------
     Path
-        ``path`` itself when it exists (or when no shipped scenario has that name, so that the
-        caller reports the missing file); otherwise the shipped scenario.
+        ``path`` itself when it is a file, has a folder part, or no shipped scenario has that name
+        (so that the caller reports what is wrong with it); otherwise the shipped scenario, even
+        when a folder of that name is in the way (an earlier run's ``-o oven_000``).
     """
     p = Path(path)
-    if p.exists() or p.parent != Path("."):
+    if p.is_file() or p.parent != Path("."):
         return p
     shipped = scenarios_dir() / _with_toml(p.name)
     return shipped if shipped.is_file() else p

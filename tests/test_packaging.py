@@ -40,6 +40,8 @@ def test_a_scenario_name_resolves_to_the_shipped_file(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert resolve_scenario("startup") == scenarios_dir() / "startup.toml"
     assert resolve_scenario("startup.toml") == scenarios_dir() / "startup.toml"
+    (tmp_path / "oven_000").mkdir()  # an earlier run's output folder of that name is not the scenario
+    assert resolve_scenario("oven_000") == scenarios_dir() / "oven_000.toml"
     (tmp_path / "startup.toml").write_text("")  # a file of that name in the working folder wins
     assert resolve_scenario("startup.toml").resolve() == (tmp_path / "startup.toml").resolve()
     assert resolve_scenario("elsewhere/startup.toml") == tmp_path.joinpath("elsewhere/startup.toml").relative_to(tmp_path)
