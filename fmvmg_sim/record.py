@@ -1,4 +1,4 @@
-"""The record format of CONTRACTS.md section 2: read, validate and write.
+"""The record format (docs/formats.md section 2): read, validate and write.
 
 A record is a CSV file with optional ``# key: value`` metadata lines, one header
 row of unit-suffixed column names and numeric rows. ``time_s`` must be strictly
@@ -35,7 +35,7 @@ KNOWN_COLUMNS: dict[str, tuple[str, bool]] = {
     "drive_amplitude_V": ("V", False),
     "agc_effort_V": ("V", False),
     "drive_frequency_Hz": ("Hz", False),
-    "rate_raw_dps": ("deg/s", False),  # written by `fmvmg compensate` (CONTRACTS.md section 3)
+    "rate_raw_dps": ("deg/s", False),  # written by `fmvmg compensate` (docs/formats.md section 3)
 }
 REQUIRED_COLUMNS = tuple(k for k, (_, req) in KNOWN_COLUMNS.items() if req)
 #: Column order used when writing a simulated record.

@@ -1,6 +1,6 @@
 """Entry point of the ``fmvmg`` console script.
 
-Exit codes (CONTRACTS.md section 1): 0 success, 2 bad input (one line naming the
+Exit codes (docs/formats.md section 1): 0 success, 2 bad input (one line naming the
 file, key or line), 1 internal failure. Set ``FMVMG_DEBUG=1`` to see tracebacks.
 """
 

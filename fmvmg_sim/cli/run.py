@@ -17,7 +17,7 @@ def register(sub) -> None:
     sub : argparse._SubParsersAction
     """
     p = sub.add_parser("run", help="simulate a scenario", description=(
-        "Simulate a scenario; writes DIR/record.csv (CONTRACTS.md section 2), DIR/summary.json and PNG plots."))
+        "Simulate a scenario; writes DIR/record.csv (docs/formats.md section 2), DIR/summary.json and PNG plots."))
     p.add_argument("scenario", help="scenario TOML file")
     p.add_argument("-o", "--out", default=None, help="output folder (default: out/<scenario name>)")
     p.add_argument("--seed", type=int, default=None, help="random seed (overrides scenario.seed)")
