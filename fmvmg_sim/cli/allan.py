@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     if args.output:
         with output_folder(args.output, command="allan") as tmp:
             atomic_write_text(tmp / "allan.json", json.dumps(out, indent=2, allow_nan=False) + "\n")
-            res.plot(tmp / "allan.png", title=f"{Path(args.record).name}: {args.column}")
+            shown = Path(*Path(args.record).parts[-2:])  # the record and its folder: out/static/record.csv
+            res.plot(tmp / "allan.png", title=f"{shown}: {args.column}")
     if args.json:
         sys.stdout.write(json.dumps(out, allow_nan=False) + "\n")
     else:
