@@ -1,6 +1,6 @@
 """Output folders written as one unit: a command's ``-o DIR`` holds one run's complete output or nothing new.
 
-Every command that writes a folder does so through :class:`OutputFolder` (:func:`output_folder`)::
+Every command that writes a folder does so through :class:`OutputFolder` (also named ``output_folder``)::
 
     with output_folder(out) as tmp:      # checked before any work: refused with exit 2 if unusable
         write_record(tmp / "record.csv", ...)
@@ -285,29 +285,5 @@ def _discard(path: Path, target: Path, old: Path | None, in_place: bool) -> None
             os.replace(old, target)
 
 
-def output_folder(path: str | os.PathLike, expect_bytes: int | None = None, command: str | None = None,
-                  in_place: bool = False) -> OutputFolder:
-    """Write a command's output folder whole or not at all (a context manager).
-
-    Parameters
-    ----------
-    path : path-like
-        The ``-o`` folder.
-    expect_bytes : int, optional
-        Expected size of the output (checked against the free space before any work).
-    command : str, optional
-        The command's name, recorded in the folder's marker file.
-    in_place : bool, optional
-        See :class:`OutputFolder`.
-
-    Returns
-    -------
-    OutputFolder
-        Entering it gives the folder to write into; leaving it without an exception commits.
-
-    Raises
-    ------
-    InputError
-        Before any work: see :func:`check_output_folder`.
-    """
-    return OutputFolder(path, expect_bytes, command, in_place)
+#: The same, under the name that reads well in a ``with`` statement: ``with output_folder(out) as tmp:``.
+output_folder = OutputFolder
