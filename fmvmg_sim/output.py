@@ -14,8 +14,9 @@ The files are written into a temporary folder beside ``DIR`` (``.DIR.tmp-*``, sa
 is renamed into place once the block ends without an exception, plots included. A second run into
 the same ``DIR`` replaces the first whole; an error or Ctrl-C inside the block leaves the old folder
 (or nothing) and removes the temporary one. The swap is two renames with Ctrl-C held off between
-them. A folder is replaced only when it is empty or was written by fmvmg (it holds the marker
-file :data:`MARKER`), so ``-o .`` or ``-o ~`` never deletes a user's files.
+them. A folder is replaced only when it is empty or was written by fmvmg and holds nothing else (its
+marker file :data:`MARKER` lists every file), so ``-o .``, ``-o ~`` or a run's folder with a
+compensation written into it later never loses a user's files.
 
 Files and folders get the usual permissions under the process umask (0644 and 0755 under 022).
 """
@@ -96,8 +97,32 @@ def format_bytes(n: float) -> str:
     return f"{n:.3g} PiB"  # pragma: no cover
 
 
-def _replaceable(target: Path) -> bool:
-    return (target / MARKER).is_file() or not any(target.iterdir())
+def _foreign_files(target: Path) -> list[str] | None:
+    """Files in an existing folder that an fmvmg run did not write there (None: not an fmvmg folder).
+
+    An empty folder has none. A folder with the marker file has those not listed in it (added after the
+    run, e.g. a compensation written beside a record), which replacing the folder would delete.
+    """
+    if not any(target.iterdir()):
+        return []
+    try:
+        listed = set(json.loads((target / MARKER).read_text(encoding="utf-8"))["files"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    present = {str(p.relative_to(target)) for p in target.rglob("*") if p.is_file() and p.name != MARKER}
+    return sorted(present - listed)
+
+
+def _refusal(target: Path) -> str | None:
+    foreign = _foreign_files(target)
+    if foreign is None:
+        return (f"is a folder holding other files (no {MARKER}: not an fmvmg output folder); "
+                "give a new or empty folder")
+    if foreign:
+        more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+        return (f"holds files the earlier run did not write ({', '.join(foreign[:3])}{more}), which replacing "
+                "it would delete; move them or give another folder")
+    return None
 
 
 def check_output_folder(path: str | os.PathLike, expect_bytes: int | None = None) -> Path:
@@ -124,9 +149,9 @@ def check_output_folder(path: str | os.PathLike, expect_bytes: int | None = None
     target = Path(path).absolute()
     if target.exists() and not target.is_dir():
         raise InputError("exists and is not a folder; expected an output folder", str(path))
-    if target.is_dir() and not _replaceable(target):
-        raise InputError(f"is a folder holding other files (no {MARKER}: not an fmvmg output folder); "
-                         "give a new or empty folder", str(path))
+    refusal = _refusal(target) if target.is_dir() else None
+    if refusal:
+        raise InputError(refusal, str(path))
     parent = target.parent
     existing = parent
     while not existing.exists():
@@ -253,10 +278,10 @@ class OutputFolder:
         if not self.in_place:
             with _no_interrupt():
                 if self.target.is_dir():
-                    if not _replaceable(self.target):  # filled by someone else while we worked
+                    refusal = _refusal(self.target)  # filled by someone else while we worked
+                    if refusal:
                         self.discard()
-                        raise InputError(f"is a folder holding other files (no {MARKER}); the output is not "
-                                         "moved there", self._user_path)
+                        raise InputError(f"{refusal} (the output is not moved there)", self._user_path)
                     self._old = self._aside()
                 os.replace(self.path, self.target)
         self._finalizer.detach()

@@ -162,3 +162,14 @@ def test_a_second_run_into_the_same_folder_leaves_none_of_the_first_runs_plots(m
     assert (out / "startup.png").is_file()
     assert main(["run", str(path), "-o", str(out), "--no-progress", "--no-plots"]) == 0
     assert sorted(p.name for p in out.iterdir()) == [MARKER, "record.csv", "summary.json"]
+
+
+def test_a_folder_with_files_added_after_its_run_is_not_replaced(tmp_path):
+    out = tmp_path / "run"
+    with output_folder(out) as tmp:
+        (tmp / "record.csv").write_text("1")
+    (out / "record-poly-baseline").mkdir()
+    (out / "record-poly-baseline" / "compensated.csv").write_text("mine")  # e.g. fmvmg compensate's default
+    with pytest.raises(InputError, match="did not write .*compensated.csv"):
+        OutputFolder(out)
+    assert (out / "record-poly-baseline" / "compensated.csv").read_text() == "mine"
