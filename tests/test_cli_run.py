@@ -131,8 +131,8 @@ def test_a_loop_that_never_starts_is_reported(make_scenario, tmp_path, capsys):
 
 @pytest.mark.parametrize("scenario, overrides, expected", [
     ("startup", ["scenario.duration_s=0.05"], "startup: drive loop start-up"),
-    ("oven_004", ["scenario.duration_s=7200", "scenario.output_rate_Hz=1"],
-     "oven_004: drive amplitude loop over 2 h (started at its steady state)"),
+    ("oven_004", ["scenario.duration_s=120", "scenario.output_rate_Hz=1"],
+     "oven_004: drive amplitude loop over 120 s (started at its steady state)"),
 ])
 def test_the_drive_loop_plot_is_titled_for_what_it_shows(tmp_path, monkeypatch, capsys, scenario, overrides,
                                                          expected):
@@ -148,3 +148,10 @@ def test_the_drive_loop_plot_is_titled_for_what_it_shows(tmp_path, monkeypatch, 
     sets = [a for o in overrides for a in ("--set", o)]
     assert main(["run", scenario, *sets, "-o", str(tmp_path / "o"), "--no-progress"]) == 0
     assert titles["startup.png"] == expected
+
+
+def test_the_drive_loop_title_gives_long_runs_in_hours():
+    from fmvmg_sim.plots import drive_loop_title
+    assert drive_loop_title("oven_004", "steady", 47250.0) == \
+        "oven_004: drive amplitude loop over 13.1 h (started at its steady state)"
+    assert drive_loop_title("startup", "rest", 1.5) == "startup: drive loop start-up"
