@@ -1,4 +1,4 @@
-"""Unmodelled effects (CONTRACTS.md section 4), switched on in a scenario's ``[effects]`` table.
+"""Unmodelled effects (docs/formats.md section 4), switched on in a scenario's ``[effects]`` table.
 
 Each effect is a small model with 1-3 physical parameters, bounds and a prior range
 (physics brief section 4), acting where the physics acts:
@@ -72,7 +72,7 @@ MODELS: dict[str, dict[str, Param]] = {
     "quantization": {"lsb_V": Param("V", 0.0, 1.0, (1e-3, 1e-2))},
 }
 
-#: The effect names of CONTRACTS.md section 4.
+#: The effect names of docs/formats.md section 4.
 EFFECT_NAMES = tuple(MODELS)
 
 

@@ -1,4 +1,4 @@
-"""The record format of CONTRACTS.md section 2: read, validate and write.
+"""The record format (docs/formats.md section 2): read, validate and write.
 
 A record is a CSV file with optional ``# key: value`` metadata lines, one header
 row of unit-suffixed column names and numeric rows. ``time_s`` must be strictly
@@ -35,7 +35,7 @@ KNOWN_COLUMNS: dict[str, tuple[str, bool]] = {
     "drive_amplitude_V": ("V", False),
     "agc_effort_V": ("V", False),
     "drive_frequency_Hz": ("Hz", False),
-    "rate_raw_dps": ("deg/s", False),  # written by `fmvmg compensate` (CONTRACTS.md section 3)
+    "rate_raw_dps": ("deg/s", False),  # written by `fmvmg compensate` (docs/formats.md section 3)
 }
 REQUIRED_COLUMNS = tuple(k for k, (_, req) in KNOWN_COLUMNS.items() if req)
 #: Column order used when writing a simulated record.
@@ -132,10 +132,12 @@ def read_record(path: str | os.PathLike, required: tuple[str, ...] = REQUIRED_CO
     """
     p = Path(path)
     name = str(path)
+    if p.is_dir():
+        raise InputError("is a folder; expected a record file (CSV)", name)
     if not p.is_file():
         raise InputError("file not found", name)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark, as spreadsheet programs write, is dropped
     except UnicodeDecodeError as exc:
         raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", name) from None
     lines = text.splitlines()
@@ -234,13 +236,26 @@ def _data_lineno(lines: list[str], header_idx: int, row: int) -> int:
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` whole or not at all (temporary file, then rename)."""
+    """Write ``text`` to ``path`` whole or not at all (temporary file, then rename).
+
+    The file gets the permissions of any new file under the process umask (0644 under 022),
+    not the temporary file's 0600.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination file.
+    text : str
+        Its whole content (written as UTF-8 with ``\\n`` line ends).
+    """
+    from .output import file_mode
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
             fh.write(text)
+        os.chmod(tmp, file_mode())
         os.replace(tmp, p)
     except BaseException:
         if os.path.exists(tmp):
@@ -293,7 +308,7 @@ def data_line_number(path: str | os.PathLike, row: int) -> int | None:
         The line number, or None when the file cannot be read or has no header.
     """
     try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
+        lines = Path(path).read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError):
         return None
     header_idx = next((i for i, s in enumerate(lines) if s.strip() and not s.strip().startswith("#")), None)

@@ -8,7 +8,7 @@ import numpy as np
 
 from .record import Record
 
-#: Record channels every engine fills (CONTRACTS.md section 2).
+#: Record channels every engine fills (docs/formats.md section 2).
 RECORD_CHANNELS = ("time_s", "temperature_C", "rate_dps", "rate_V", "rate_true_dps", "quadrature_V",
                    "drive_amplitude_V", "agc_effort_V", "drive_frequency_Hz")
 
@@ -27,12 +27,15 @@ class SimResult:
         Engine, timings, steps per cycle, nominal scale factor, analytic predictions.
     metadata : dict
         ``# key: value`` lines for the record file.
+    summary : dict
+        What ``summary.json`` holds (filled by :func:`fmvmg_sim.simulate`; empty from an engine).
     """
 
     channels: dict
     internal: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
 
     @property
     def time_s(self) -> np.ndarray:
@@ -45,7 +48,7 @@ class SimResult:
         return self.internal[name]
 
     def to_record(self) -> Record:
-        """The record (CONTRACTS.md section 2) of this result.
+        """The record (docs/formats.md section 2) of this result.
 
         Returns
         -------

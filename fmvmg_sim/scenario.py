@@ -30,8 +30,9 @@ import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .device import DEVICES_DIR, Device, load_device
+from .device import Device, load_device
 from .errors import InputError
+from .paths import devices_dir, resolve_device, resolve_scenario, shipped_devices, shipped_scenarios
 from .profiles import PiecewiseProfile, build_profile
 from .schema import Bool, Choice, Num, Text, validate_tree
 from .tomlio import load_toml, parse_override, set_path, suggest
@@ -156,8 +157,14 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None,
         Any unknown key, wrong type or unit, bad value, missing device file, or a
         profile whose times do not increase; the message names the key path.
     """
+    path = resolve_scenario(path)
     name = str(path)
+    if path.is_dir():
+        raise InputError("is a folder; expected a scenario TOML file", name)
+    if not path.is_file():
+        raise InputError(f"file not found (shipped scenarios: {', '.join(shipped_scenarios())})", name)
     tree = load_toml(path)
+    set_keys = []
     for text in overrides or []:
         key, value = parse_override(text)
         top = key.split(".")[0]
@@ -165,6 +172,28 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None,
             raise InputError(f"unknown table {top!r}{suggest(top, TOP_KEYS)}; tables are {list(TOP_KEYS)}",
                              f"--set {key}")
         set_path(tree, key, value)
+        set_keys.append((key, text))
+    try:
+        return _build(tree, path, name, seed, fidelity)
+    except InputError as exc:
+        raise _blame_override(exc, name, set_keys) from None
+
+
+def _blame_override(exc: InputError, name: str, set_keys: list[tuple[str, str]]) -> InputError:
+    """The error re-addressed to the ``--set`` argument whose value it is about (else unchanged)."""
+    where = exc.where or ""
+    if not where.startswith(f"{name}: "):
+        return exc
+    keypath = where[len(name) + 2:]
+    for key, text in reversed(set_keys):  # the last --set of a key is the one in effect
+        for prefix in ("", "device."):  # [circuit] values are validated with the device's
+            k = prefix + key
+            if keypath == k or keypath.startswith((f"{k}.", f"{k}[")):
+                return InputError(exc.message, f"--set {text.strip()}: {keypath[len(prefix):]}")
+    return exc
+
+
+def _build(tree: dict, path: Path, name: str, seed: int | None, fidelity: str | None) -> Scenario:
     if seed is not None:
         set_path(tree, "scenario.seed", seed)
     if fidelity is not None:
@@ -180,13 +209,11 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None,
     if "duration_s" not in settings["scenario"]:
         raise InputError("missing key (how long to simulate, in seconds)", f"{name}: scenario.duration_s")
     device_file = settings["scenario"]["device_file"]
-    dpath = Path(device_file)
     base = Path(path).resolve().parent
-    candidates = [base / dpath, DEVICES_DIR / dpath, DEVICES_DIR / f"{device_file}.toml"]
-    found = next((c for c in candidates if c.is_file()), None)
+    found = resolve_device(device_file, base)
     if found is None:
-        raise InputError(f"device file {device_file!r} not found (looked in {base} and {DEVICES_DIR})",
-                         f"{name}: scenario.device_file")
+        raise InputError(f"device file {device_file!r} not found (looked in {base} and among the shipped "
+                         f"devices {shipped_devices()} in {devices_dir()})", f"{name}: scenario.device_file")
     device = load_device(found)
     dev_over = copy.deepcopy(tree.get("device", {}))
     if "circuit" in tree:

@@ -15,9 +15,8 @@ from fmvmg_sim.errors import InputError
 from fmvmg_sim.io.bmi270 import read_bmi270_log
 from fmvmg_sim.record import RecordWarning, read_record
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = Path(__file__).resolve().parent / "data"  # copies of outside reference data, with provenance and licence
 REAL = DATA / "real-bmi270"
-needs_real = pytest.mark.skipif(not REAL.is_dir(), reason=f"shared BMI270 logs not found at {REAL}")
 
 SYNTH = """=~=~=~=~=~=~=~=~=~=~=~= PuTTY log 2026.05.08 15:02:51 =~=~=~=~=~=~=~=~=~=~=~=
 0.003,-0.032,0.73,0.12,-1.10
@@ -81,7 +80,6 @@ def test_cli_import_writes_a_readable_record(tmp_path, capsys):
     assert "absent.csv: file not found" in capsys.readouterr().err
 
 
-@needs_real
 @pytest.mark.parametrize("name, skipped, n_rows", [
     ("BMI_270_cold_test_.csv", [9, 3258], 3256),
     ("BMI_270_hot_test.csv", [2, 13, 6537], 6534),
@@ -93,7 +91,6 @@ def test_real_logs_convert(name, skipped, n_rows):
     assert imp.record.time_s[-1] == pytest.approx((n_rows - 1) / 50.0)
 
 
-@needs_real
 def test_real_cold_log_allan(tmp_path):
     imp = read_bmi270_log(REAL / "BMI_270_cold_test_.csv", axis="z")
     s = series_from_record(imp.record, "rate_dps")
@@ -108,7 +105,6 @@ def test_real_cold_log_allan(tmp_path):
     assert res.rrw is None
 
 
-@needs_real
 def test_real_hot_log_steep_short_tau():
     imp = read_bmi270_log(REAL / "BMI_270_hot_test.csv", axis="z")
     s = series_from_record(imp.record, "rate_dps")

@@ -1,4 +1,4 @@
-"""The closed loop at carrier level against analytic results (issue 2's physics checks)."""
+"""The closed loop at carrier level against analytic results."""
 
 import numpy as np
 import pytest
@@ -29,7 +29,7 @@ def test_startup_self_oscillates_at_the_drive_resonance(make_scenario, T):
     assert amp[0] < 0.01 * vref  # started from a 10 nm perturbation
     assert np.mean(_tail(amp, 0.1)) == pytest.approx(vref, rel=2e-3)
     f = _mean_freq(res)
-    assert f == pytest.approx(dg.resonator.f_drive_Hz, rel=5e-4)  # the 0.05 % of issue 2
+    assert f == pytest.approx(dg.resonator.f_drive_Hz, rel=5e-4)  # within 0.05 %
     # and, much tighter, the averaged model's oscillation frequency
     assert f == pytest.approx(steady_state(dg).f_Hz, abs=0.01)
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from fmvmg_sim.cli.main import main
+from fmvmg_sim.output import MARKER
 
 FS = 100.0
 N_DPS_SQRT_S = 1.66 / 60.0
@@ -50,7 +51,7 @@ def test_table_and_output_dir(white_record, tmp_path, capsys):
     d = json.loads((out_dir / "allan.json").read_text())
     assert len(d["taus_s"]) > 30  # dense taus
     assert (out_dir / "allan.png").read_bytes()[:4] == b"\x89PNG"
-    assert sorted(p.name for p in out_dir.iterdir()) == ["allan.json", "allan.png"]
+    assert sorted(p.name for p in out_dir.iterdir()) == [MARKER, "allan.json", "allan.png"]
 
 
 def test_other_column_uses_its_unit(white_record, capsys):
@@ -106,3 +107,37 @@ def test_needs_only_time_and_the_column_and_fills_short_nan_runs(tmp_path, capsy
     p = _write(tmp_path / "min2.csv", np.arange(3000) / FS, y)
     assert main(["allan", str(p)]) == 2
     assert f"{p} line 203" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("n", [3, 7])
+def test_a_record_too_short_for_any_allan_estimate_is_refused(tmp_path, capsys, n):
+    y = np.random.default_rng(3).standard_normal(n)
+    p = _write(tmp_path / "short.csv", np.arange(n) / FS, y)
+    assert main(["allan", str(p), "--json", "-o", str(tmp_path / "o")]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and "not enough data" in cap.err and f"{n} samples" in cap.err
+    assert len(cap.err.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_the_shortest_accepted_record_reads_its_minimum_at_the_first_tau(tmp_path, capsys):
+    y = np.random.default_rng(3).standard_normal(8)
+    p = _write(tmp_path / "eight.csv", np.arange(8) / FS, y)
+    assert main(["allan", str(p), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["n_clusters"][0] == 8 and d["arw_deg_per_sqrt_h"] is None
+
+
+def test_a_byte_order_mark_is_accepted(white_record, capsys):
+    assert main(["allan", str(white_record), "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    bom = white_record.with_name("bom.csv")
+    bom.write_bytes(b"\xef\xbb\xbf" + white_record.read_bytes())  # as spreadsheet programs write UTF-8
+    assert main(["allan", str(bom), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["adev"] == plain["adev"]
+
+
+def test_a_folder_given_as_the_record_is_named_as_such(tmp_path, capsys):
+    assert main(["allan", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "is a folder; expected a record file" in err and "not found" not in err

@@ -1,6 +1,7 @@
 """``fmvmg run`` as a user runs it: outputs, bad scenarios (exit 2), loop failures reported, not crashed."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -72,6 +73,43 @@ def test_bad_set_override_exits_2(make_scenario, tmp_path, capsys):
     assert main(["run", str(tmp_path / "missing.toml")]) == 2
 
 
+@pytest.mark.parametrize("override, key", [
+    ("circuit.pi.kp=fast", "circuit.pi.kp"),                      # a circuit value (validated with the device)
+    ("device.mechanics.q_drive=-5", "device.mechanics.q_drive"),  # a device value
+    ("scenario.duration_s=-1", "scenario.duration_s"),            # a scenario value
+    ("temperature.segments=[{hold_s=-3}]", "temperature.segments[0].hold_s"),  # inside a profile
+    ("effects.thermal_lag.tau_s=1e9", "effects.thermal_lag.tau_s"),            # an effect parameter
+    ("scenario.device_file=nope", "scenario.device_file"),
+])
+def test_a_bad_set_is_blamed_on_the_set_argument_not_the_scenario_file(make_scenario, tmp_path, capsys,
+                                                                        override, key):
+    path = make_scenario()
+    assert main(["run", str(path), "--set", "scenario.seed=3", "--set", override, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"fmvmg: error: --set {override}: {key}: "), err
+    assert str(path) not in err
+
+
+def test_a_bad_value_in_the_file_is_still_blamed_on_the_file(make_scenario, tmp_path, capsys):
+    path = make_scenario(body="[circuit.pi]\nkp = -1\n")
+    assert main(["run", str(path), "--set", "circuit.pi.ki_per_s=100", "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: " in err and "circuit.pi.kp" in err and "--set" not in err
+
+
+def test_a_folder_given_as_the_scenario_is_named_as_such(tmp_path, capsys):
+    assert main(["run", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+
+
+def test_a_shipped_scenario_runs_by_name(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "startup", "--set", "scenario.duration_s=0.02", "--no-plots", "--json", "-o", "o"]) == 0
+    assert json.loads(capsys.readouterr().out)["simulated_time_s"] == pytest.approx(0.02, abs=1e-3)
+    assert main(["run", "no_such_scenario"]) == 2
+    assert "shipped scenarios: " in capsys.readouterr().err
+
+
 def test_a_loop_that_cannot_reach_its_setpoint_is_reported(make_scenario, tmp_path, capsys):
     path = make_scenario(duration_s=0.3, state="rest")
     assert main(["run", str(path), "-o", str(tmp_path / "o"), "--json", "--no-plots",
@@ -89,3 +127,31 @@ def test_a_loop_that_never_starts_is_reported(make_scenario, tmp_path, capsys):
                  "--set", "circuit.drive_amp.gain=-2.0"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["status"] == "no_oscillation"
+
+
+@pytest.mark.parametrize("scenario, overrides, expected", [
+    ("startup", ["scenario.duration_s=0.05"], "startup: drive loop start-up"),
+    ("oven_004", ["scenario.duration_s=120", "scenario.output_rate_Hz=1"],
+     "oven_004: drive amplitude loop over 120 s (started at its steady state)"),
+])
+def test_the_drive_loop_plot_is_titled_for_what_it_shows(tmp_path, monkeypatch, capsys, scenario, overrides,
+                                                         expected):
+    import fmvmg_sim.plots as plots
+    titles = {}
+    real = plots.save_figure
+
+    def spy(fig, path):
+        titles[Path(path).name] = fig.axes[0].get_title()
+        real(fig, path)
+
+    monkeypatch.setattr(plots, "save_figure", spy)
+    sets = [a for o in overrides for a in ("--set", o)]
+    assert main(["run", scenario, *sets, "-o", str(tmp_path / "o"), "--no-progress"]) == 0
+    assert titles["startup.png"] == expected
+
+
+def test_the_drive_loop_title_gives_long_runs_in_hours():
+    from fmvmg_sim.plots import drive_loop_title
+    assert drive_loop_title("oven_004", "steady", 47250.0) == \
+        "oven_004: drive amplitude loop over 13.1 h (started at its steady state)"
+    assert drive_loop_title("startup", "rest", 1.5) == "startup: drive loop start-up"

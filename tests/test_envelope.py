@@ -1,4 +1,4 @@
-"""The averaged (envelope) model against the carrier model at -40, 25 and 85 C (issue 3's agreement tests)."""
+"""The averaged (envelope) model against the carrier model at -40, 25 and 85 C."""
 
 import numpy as np
 import pytest

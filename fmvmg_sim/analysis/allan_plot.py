@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..output import file_mode
+
 
 def plot_allan(result, path: str | os.PathLike, title: str | None = None) -> None:
     """Write the Allan curve of ``result`` as a PNG.
@@ -72,6 +74,7 @@ def plot_allan(result, path: str | os.PathLike, title: str | None = None) -> Non
     try:
         with os.fdopen(fd, "wb") as fh:
             fig.savefig(fh, format="png")
+        os.chmod(tmp, file_mode())  # the umask's permissions, not mkstemp's 0600
         os.replace(tmp, p)
     except BaseException:
         if os.path.exists(tmp):

@@ -11,10 +11,8 @@ import json
 import sys
 from pathlib import Path
 
-from ..analysis.allan import allan_deviation
-from ..analysis.series import MAX_GAP_STEPS, MAX_NAN_FILL, series_from_record
+from ..analysis.series import MAX_GAP_STEPS, MAX_NAN_FILL
 from ..errors import InputError
-from ..record import atomic_write_text, read_record
 
 
 def register(subparsers) -> None:
@@ -58,20 +56,31 @@ def run(args: argparse.Namespace) -> int:
     int
         Exit code 0 (bad input is raised as :class:`~fmvmg_sim.errors.InputError`, exit code 2).
     """
+    from ..analysis.allan import allan_deviation
+    from ..analysis.series import series_from_record
+    from ..output import check_output_folder, output_folder
+    from ..record import atomic_write_text, read_record
+
+    if args.output:
+        check_output_folder(args.output)
     rec = read_record(args.record, required=("time_s", args.column))
     series = series_from_record(rec, args.column, resample=args.resample)
     res = allan_deviation(series.values, series.fs_Hz, taus=args.taus, unit=series.unit, column=args.column)
+    if not (res.n_clusters >= res.min_clusters).any():
+        raise InputError(f"not enough data for an Allan analysis: {res.n_samples} samples of {args.column} "
+                         f"({res.n_samples / res.fs_Hz:.3g} s); it needs at least one averaging time with "
+                         f"{res.min_clusters} independent clusters, i.e. at least {res.min_clusters} samples "
+                         "(many more for bias instability)", str(args.record))
     res.notes[:0] = series.notes
     out = res.to_dict()
     out = {"record": str(args.record), **out, "resampled": series.resampled, "n_filled": series.n_filled}
     for note in res.notes:
         sys.stderr.write(f"fmvmg allan: note: {note}\n")
     if args.output:
-        d = Path(args.output)
-        if d.exists() and not d.is_dir():
-            raise InputError("expected a directory for -o", str(d))
-        atomic_write_text(d / "allan.json", json.dumps(out, indent=2, allow_nan=False) + "\n")
-        res.plot(d / "allan.png", title=f"{Path(args.record).name}: {args.column}")
+        with output_folder(args.output, command="allan") as tmp:
+            atomic_write_text(tmp / "allan.json", json.dumps(out, indent=2, allow_nan=False) + "\n")
+            shown = Path(*Path(args.record).parts[-2:])  # the record and its folder: out/static/record.csv
+            res.plot(tmp / "allan.png", title=f"{shown}: {args.column}")
     if args.json:
         sys.stdout.write(json.dumps(out, allow_nan=False) + "\n")
     else:

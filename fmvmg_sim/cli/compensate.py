@@ -89,10 +89,14 @@ def _jsonable(x):
 def run(args) -> int:
     """Execute ``fmvmg compensate`` with parsed ``args``; returns the exit code."""
     from ..compensation import get_method
+    from ..output import OutputFolder
 
     cls = get_method(args.method)
     record = read_record(args.record)
     train = read_record(args.train) if args.train else record
+    outdir = Path(args.output) if args.output else Path(args.record).with_suffix("").parent / (
+        Path(args.record).stem + f"-{args.method}")
+    staged = OutputFolder(outdir, command="compensate")  # refused now, before the fit, if it cannot be written
     kw = {"progress": not args.no_progress} if "progress" in cls().get_params() else {}
     if "seed" in cls().get_params():
         kw["seed"] = args.seed
@@ -104,15 +108,13 @@ def run(args) -> int:
     else:
         out = comp.fit_transform(record)
     wall = time.perf_counter() - t0
-    outdir = Path(args.output) if args.output else Path(args.record).with_suffix("").parent / (
-        Path(args.record).stem + f"-{args.method}")
     cols = dict(record.columns)
     cols["rate_raw_dps"] = record["rate_dps"]
     cols["rate_dps"] = np.asarray(out, float)
     meta = dict(record.metadata)
     meta.update({"compensation_method": args.method, "in_sample": str(not args.train).lower(),
                  "trained_on": str(args.train or args.record), "source_record": str(args.record)})
-    write_record(outdir / "compensated.csv", Record(cols, meta))
+    write_record(staged.path / "compensated.csv", Record(cols, meta))
     result = {"method": args.method, "in_sample": not args.train, "record": str(args.record),
               "train": str(args.train or args.record), "before": metrics(record), "after": metrics(record, out),
               "wall_s": round(wall, 2), "output": str(outdir / "compensated.csv"),
@@ -120,7 +122,8 @@ def run(args) -> int:
               "transform_diagnostics": getattr(comp, "transform_diagnostics_", None)}
     result = _jsonable(result)
     text = json.dumps(result, indent=1)
-    atomic_write_text(outdir / "compensation.json", text + "\n")
+    atomic_write_text(staged.path / "compensation.json", text + "\n")
+    staged.commit()
     if args.json:
         sys.stdout.write(json.dumps(result) + "\n")
     else:

@@ -48,23 +48,25 @@ def _parse_params(items: list[str] | None) -> dict:
 def run(args) -> int:
     """Execute ``fmvmg compensate-eval`` with parsed ``args``; returns the exit code."""
     from ..compensation.evaluate import evaluate, markdown_table, plot_allan, plot_summary, plot_traces
+    from ..output import OutputFolder
 
     methods = _parse_methods(args.methods)
+    outdir = Path(args.output)
+    staged = OutputFolder(outdir, command="compensate-eval")  # refused now, before the evaluation, if unwritable
     ev = evaluate(methods, seeds=args.seeds, quick=args.quick, in_sample=args.in_sample,
                   bandwidth=not args.no_bandwidth, method_params=_parse_params(args.param),
                   progress=not args.no_progress, seed_offset=args.seed_offset)
-    outdir = Path(args.output)
-    outdir.mkdir(parents=True, exist_ok=True)
     md = markdown_table(ev)
     data = ev.to_dict()
-    atomic_write_text(outdir / "compensation_eval.md", md)
-    atomic_write_text(outdir / "compensation_eval.json", json.dumps(data, indent=1) + "\n")
+    atomic_write_text(staged.path / "compensation_eval.md", md)
+    atomic_write_text(staged.path / "compensation_eval.json", json.dumps(data, indent=1) + "\n")
     plots = {}
     if not args.no_plots:
         for name, fn in (("allan", plot_allan), ("traces", plot_traces), ("summary", plot_summary)):
             p = outdir / f"compensation_eval_{name}.png"
-            fn(ev, p)
+            fn(ev, staged.path / p.name)
             plots[name] = str(p)
+    staged.commit()
     if args.json:
         sys.stdout.write(json.dumps({"summary": data["summary"], "config": data["config"], "plots": plots,
                                      "output": str(outdir)}) + "\n")

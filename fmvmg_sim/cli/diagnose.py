@@ -44,15 +44,18 @@ def main(args) -> int:
     from ..diagnosis.pipeline import N_NULL, diagnose
     from ..diagnosis.report import write_report
     from ..errors import InputError
+    from ..output import OutputFolder
     if args.null_runs is not None and args.null_runs < 2:
         raise InputError("needs at least 2 null re-simulations", "--null-runs")
+    out = Path(args.out) if args.out else Path("out") / f"diagnose_{Path(args.record).stem}"
+    staged = OutputFolder(out, command="diagnose")  # refused now, before the diagnosis, if unwritable
     rep = diagnose(args.record, args.scenario, n_null=args.null_runs or N_NULL, seed=args.seed,
                    progress=False if args.no_progress else None)
-    out = Path(args.out) if args.out else Path("out") / f"diagnose_{Path(args.record).stem}"
-    cj = write_report(rep, out)
+    cj = write_report(rep, staged.path)
     if not args.no_plots:
         from ..diagnosis.plots import plot_all
-        plot_all(rep, out)
+        plot_all(rep, staged.path)
+    staged.commit()
     if args.json:
         sys.stdout.write(json.dumps(cj) + "\n")
     else:

@@ -59,11 +59,13 @@ def main(args) -> int:
     from ..diagnosis.benchmark import run_benchmark
     from ..diagnosis.cases import CaseMix, MixError
     from ..errors import InputError
+    from ..output import OutputFolder
+    from ..paths import resolve_scenario
     if args.cases < 1:
         raise InputError("must be >= 1", "--cases")
     if args.duration_h * 3600 < 3600:
         raise InputError("cases must be at least 1 h long (training plus held-out windows)", "--duration-h")
-    scn = args.scenario or str(Path(__file__).resolve().parents[2] / "scenarios" / "nominal_a.toml")
+    scn = str(resolve_scenario(args.scenario or "nominal_a"))
     if not Path(scn).is_file():
         raise InputError("file not found", scn)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()] if args.effects is not None else None
@@ -83,8 +85,11 @@ def main(args) -> int:
             stored_cases(cases_from)
         except ValueError as exc:
             raise InputError(str(exc), "--cases-from") from None
+    # written in place (the labels name their cases' paths), the previous run put back if this one fails
+    staged = OutputFolder(args.out, command="diagnose-benchmark", in_place=True)
     sc = run_benchmark(args.cases, args.seed, Path(args.out), scn, args.scheduler, args.duration_h * 3600.0,
                        args.rate_hz, args.null_runs, args.workers, progress=True, mix=mix, cases_from=cases_from)
+    staged.commit()
     slim = {k: v for k, v in sc.items() if k != "rows"}
     if args.json:
         sys.stdout.write(json.dumps(slim, default=float) + "\n")

@@ -17,7 +17,7 @@ def register(sub) -> None:
     sub : argparse._SubParsersAction
     """
     p = sub.add_parser("run", help="simulate a scenario", description=(
-        "Simulate a scenario; writes DIR/record.csv (CONTRACTS.md section 2), DIR/summary.json and PNG plots."))
+        "Simulate a scenario; writes DIR/record.csv (docs/formats.md section 2), DIR/summary.json and PNG plots."))
     p.add_argument("scenario", help="scenario TOML file")
     p.add_argument("-o", "--out", default=None, help="output folder (default: out/<scenario name>)")
     p.add_argument("--seed", type=int, default=None, help="random seed (overrides scenario.seed)")
@@ -43,23 +43,26 @@ def main(args) -> int:
     int
         Exit code.
     """
+    from ..output import output_folder
     from ..record import atomic_write_text, write_record
-    from ..runner import run_scenario, vref_profile_V
+    from ..runner import check_fits_in_memory, record_size, run_scenario, vref_profile_V
     from ..scenario import load_scenario
 
     scn = load_scenario(args.scenario, args.overrides, seed=args.seed, fidelity=args.fidelity)
     out = Path(args.out) if args.out else Path("out") / scn.name
-    res, summary = run_scenario(scn, progress=False if args.no_progress else None)
-    out.mkdir(parents=True, exist_ok=True)
-    write_record(out / "record.csv", res.to_record())
-    atomic_write_text(out / "summary.json", json.dumps(strict(summary), indent=2) + "\n")
-    if not args.no_plots:
-        from ..plots import plot_channels, plot_startup
-        plot_startup(res, vref_profile_V(scn, res.time_s, res["temperature_C"]), out / "startup.png")
-        plot_channels(res, out / "channels.png")
-        if res.info.get("engine") == "envelope" or scn.duration_s > 60:
-            from ..plots_long import plot_long_run
-            plot_long_run(res, out)
+    check_fits_in_memory(scn)
+    with output_folder(out, expect_bytes=record_size(scn)["csv_bytes"], command="run") as tmp:
+        res, summary = run_scenario(scn, progress=False if args.no_progress else None)
+        write_record(tmp / "record.csv", res.to_record())
+        atomic_write_text(tmp / "summary.json", json.dumps(strict(summary), indent=2) + "\n")
+        if not args.no_plots:
+            from ..plots import drive_loop_title, plot_channels, plot_startup
+            title = drive_loop_title(scn.name, scn.settings["initial"]["state"], scn.duration_s)
+            plot_startup(res, vref_profile_V(scn, res.time_s, res["temperature_C"]), tmp / "startup.png", title)
+            plot_channels(res, tmp / "channels.png")
+            if res.info.get("engine") == "envelope" or scn.duration_s > 60:
+                from ..plots_long import plot_long_run
+                plot_long_run(res, tmp)
     for m in summary["messages"]:
         sys.stderr.write(f"fmvmg: {summary['status']}: {m}\n")
     if args.json:

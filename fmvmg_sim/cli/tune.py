@@ -11,9 +11,8 @@ import json
 import sys
 from pathlib import Path
 
-from ..paths import scenarios_dir
-
 from ..jsonout import strict
+from ..paths import scenarios_dir
 
 DEFAULT_SCENARIO = scenarios_dir() / "startup.toml"
 
@@ -100,6 +99,7 @@ def main(args) -> int:
     """
     import numpy as np
 
+    from ..output import output_folder
     from ..record import atomic_write_text
     from ..scenario import load_scenario
     from ..tuning.report import CHECK_TEMPERATURES_C, build_report, format_table
@@ -116,21 +116,21 @@ def main(args) -> int:
     qt = args.q_tolerance
     spec = RobustSpec(temperatures_C=tuple(np.linspace(-40.0, 85.0, args.grid_points)),
                       q_factors=(1.0 - qt, 1.0, 1.0 + qt) if qt > 0 else (1.0,))
-    report = build_report(device, temps, spec, given=args.gains, simulate=not args.no_sim, log=log)
-    out.mkdir(parents=True, exist_ok=True)
-    data = strict(report.as_dict())
-    data["scenario"] = str(args.scenario)
-    atomic_write_text(out / "tune.json", json.dumps(data, indent=2) + "\n")
-    if not args.no_plots:
-        from ..tuning.plots import plot_bode, plot_startups, plot_steps
-        plot_bode(report.loops(device), out / "bode.png")
-        tuned = report.tuned
-        if report.steps:
-            plot_steps(report.steps[tuned], out / "step.png")
-        else:
-            plot_steps([], out / "step.png", predicted_only=report.metrics[tuned])
-        if report.startups:
-            plot_startups(report.startups, out / "startup.png")
+    with output_folder(out, command="tune") as tmp:
+        report = build_report(device, temps, spec, given=args.gains, simulate=not args.no_sim, log=log)
+        data = strict(report.as_dict())
+        data["scenario"] = str(args.scenario)
+        atomic_write_text(tmp / "tune.json", json.dumps(data, indent=2) + "\n")
+        if not args.no_plots:
+            from ..tuning.plots import plot_bode, plot_startups, plot_steps
+            plot_bode(report.loops(device), tmp / "bode.png")
+            tuned = report.tuned
+            if report.steps:
+                plot_steps(report.steps[tuned], tmp / "step.png")
+            else:
+                plot_steps([], tmp / "step.png", predicted_only=report.metrics[tuned])
+            if report.startups:
+                plot_startups(report.startups, tmp / "startup.png")
     if args.json:
         sys.stdout.write(json.dumps(data) + "\n")
     else:
@@ -140,25 +140,26 @@ def main(args) -> int:
 
 
 def _sweep(args, device, out, temps, log) -> int:
+    from ..output import output_folder
     from ..record import atomic_write_text
     from ..tuning.sweep import run_sweep
     kps = _grid(args.kp_grid, "--kp-grid")
     kis = _grid(args.ki_grid, "--ki-grid")
-    res = run_sweep(device, kps, kis, temps, simulate=args.sweep_sim, scheduler=args.scheduler,
-                    n_workers=args.workers, log=log)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "sweep.csv", res.to_csv())
-    data = strict(res.as_dict())
-    atomic_write_text(out / "sweep.json", json.dumps(data, indent=2) + "\n")
-    if not args.no_plots:
-        from ..tuning.linear_loop import diagram_at, pole_zero_rule
-        from ..tuning.plots import plot_sweep_heatmap
-        pi = device.values["circuit"]["pi"]
-        marks = {"pole-zero rule": pole_zero_rule(diagram_at(device, device.reference_temperature_C)),
-                 "current": (pi["kp"], pi["ki_per_s"])}
-        if args.gains:
-            marks["given"] = tuple(args.gains)
-        plot_sweep_heatmap(res, out / "sweep_heatmap.png", marks)
+    with output_folder(out, command="tune --sweep") as tmp:
+        res = run_sweep(device, kps, kis, temps, simulate=args.sweep_sim, scheduler=args.scheduler,
+                        n_workers=args.workers, log=log)
+        atomic_write_text(tmp / "sweep.csv", res.to_csv())
+        data = strict(res.as_dict())
+        atomic_write_text(tmp / "sweep.json", json.dumps(data, indent=2) + "\n")
+        if not args.no_plots:
+            from ..tuning.linear_loop import diagram_at, pole_zero_rule
+            from ..tuning.plots import plot_sweep_heatmap
+            pi = device.values["circuit"]["pi"]
+            marks = {"pole-zero rule": pole_zero_rule(diagram_at(device, device.reference_temperature_C)),
+                     "current": (pi["kp"], pi["ki_per_s"])}
+            if args.gains:
+                marks["given"] = tuple(args.gains)
+            plot_sweep_heatmap(res, tmp / "sweep_heatmap.png", marks)
     best = res.best()
     if args.json:
         sys.stdout.write(json.dumps(data) + "\n")

@@ -46,6 +46,7 @@ import numpy as np
 
 from ..analysis.allan import allan_deviation, oadev_numpy
 from ..errors import InputError
+from ..paths import scenarios_dir
 from ..record import Record
 
 #: Name of the uncompensated output in method lists.
@@ -57,8 +58,7 @@ BANDWIDTH_FREQS_HZ = (1.0, 10.0, 50.0)
 #: Honest bias instability is read at tau >= this factor x the filter time constant.
 TAU_FACTOR = 10.0
 
-_ROOT = Path(__file__).resolve().parents[2]
-SCENARIO_DIR = _ROOT / "scenarios"
+SCENARIO_DIR = scenarios_dir()
 
 
 def _segments(*segs) -> str:

@@ -1,4 +1,4 @@
-"""Importers that turn third-party logs into records (CONTRACTS.md section 2).
+"""Importers that turn third-party logs into records (docs/formats.md section 2).
 
 Modules
 -------

@@ -1,6 +1,6 @@
 """Bosch BMI270 serial logs (PuTTY captures) to records.
 
-Log format (``/work/shared/data/real-bmi270/PROVENANCE.txt``): one sample per line,
+Log format (``tests/data/real-bmi270/PROVENANCE.txt``): one sample per line,
 ``Temperature[C], Accel_X, Accel_Y, Accel_Z, Gyro_X, Gyro_Y, Gyro_Z``, logged at 50 Hz with no
 time column; gyro in deg/s printed with 2 decimals (effective quantum 0.061 deg/s); accel printed
 as g/4 (the author multiplies by 4). A PuTTY banner line (``=~=~=... PuTTY log ...``) opens the
@@ -156,9 +156,11 @@ def read_bmi270_log(path: str | Path, axis: str = "z", rate_Hz: float = 50.0) ->
     if not (math.isfinite(rate_Hz) and rate_Hz > 0):
         raise InputError(f"rate must be positive, got {rate_Hz!r} Hz")
     p = Path(path)
+    if p.is_dir():
+        raise InputError("is a folder; expected a BMI270 log file", name)
     if not p.is_file():
         raise InputError("file not found", name)
-    text = p.read_bytes().decode("utf-8", errors="replace")  # serial noise may hold stray bytes
+    text = p.read_bytes().decode("utf-8-sig", errors="replace")  # serial noise may hold stray bytes
     slots: list[tuple[int, list[float] | None, str | None, str]] = []
     for i, line in enumerate(text.splitlines(), start=1):
         s = line.strip()

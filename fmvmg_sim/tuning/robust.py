@@ -12,7 +12,7 @@ Problem (every plant from :mod:`.linear_loop`, i.e. from the diagram's blocks)::
         |L_i(j w_c,i)| = 1,   Re L_i(j w_c,i) >= -cos(PM_min)      phase margin
         Im L_i(j w_180,i) = 0, -10^(-GM_min/20) <= Re L_i(j w_180,i) <= 0,  w_180,i >= w_c,i
 
-**Why settling time, and how it is made smooth.** The issue asks for the settling time;
+**Why settling time, and how it is made smooth.** A user tunes for settling time;
 ITAE is smooth but weighs the whole error history and, for this loop, trades a slow
 Q-mismatch tail for overshoot differently from what a user reads off a step. Settling
 time itself is discontinuous in the gains (it jumps when an overshoot peak crosses the
