@@ -76,8 +76,8 @@ def parameter_blocks(scn: Scenario, fx: EffectSet, dt_out: float, n_out: int, t_
     """Parameter blocks of a run and the die temperature each is discretised at.
 
     Blocks are about :data:`BLOCK_S` long, end at every jump of the temperature profile (at the
-    output sample nearest to it, as the carrier engine's samples take the temperature at their
-    middle) and are cut shorter where the die temperature would move more than
+    start of the output sample it falls in, the first whose record shows the new temperature)
+    and are cut shorter where the die temperature would move more than
     :data:`BLOCK_SPAN_K` within one. Each block's temperature is the mean of the die temperature
     over it.
 
@@ -99,7 +99,9 @@ def parameter_blocks(scn: Scenario, fx: EffectSet, dt_out: float, n_out: int, t_
     """
     nob = max(1, min(n_out, int(round(BLOCK_S / dt_out))))
     cuts = set(range(0, n_out, nob))
-    cuts.update(int(c) for c in np.round(scn.temperature.jumps_s() / dt_out) if 0 < c < n_out)
+    # a jump enters with the sample it falls in: the record's temperature_C, the value over each sample (the
+    # left limit at its end), shows it there
+    cuts.update(int(c) for c in np.floor(scn.temperature.jumps_s() / dt_out + 1e-9) if 0 < c < n_out)
     edges = np.array(sorted(cuts) + [n_out])
     lag = bool(fx.get("thermal_lag"))
     if lag:  # the die temperature's integral on the fine grid, read at the block edges
@@ -122,15 +124,25 @@ def parameter_blocks(scn: Scenario, fx: EffectSet, dt_out: float, n_out: int, t_
     k = np.searchsorted(te, pts_t[inside], side="right") - 1
     np.maximum.at(hi, k, pts_T[inside])
     np.minimum.at(lo, k, pts_T[inside])
-    # blocks whose temperature spans more than BLOCK_SPAN_K (fast ramps) are cut into equal parts
-    parts = np.minimum(np.diff(edges), np.maximum(1, np.ceil((hi - lo) / BLOCK_SPAN_K - 1e-9))).astype(int)
+    # blocks whose temperature spans more than BLOCK_SPAN_K (fast ramps) are cut where the temperature has
+    # moved by BLOCK_SPAN_K along them (at output samples)
+    split = (hi - lo) > BLOCK_SPAN_K
     blocks = []
-    for a, b, k in zip(edges[:-1], edges[1:], parts):
-        if k == 1:
+    for a, b, cut in zip(edges[:-1], edges[1:], split):
+        if not cut:
             blocks.append((int(a), int(b - a)))
             continue
-        cut = np.unique(np.round(np.linspace(a, b, k + 1)).astype(int))
-        blocks += [(int(c0), int(c1 - c0)) for c0, c1 in zip(cut[:-1], cut[1:])]
+        tk = np.arange(a, b + 1) * dt_out
+        Tk = np.interp(tk, t_fine, die_fine) if lag else np.asarray(scn.temperature(tk), dtype=float)
+        if not lag:
+            Tk[-1] = scn.temperature.left_limit(tk[-1])
+        moved = np.concatenate(([0.0], np.cumsum(np.abs(np.diff(Tk)))))
+        # the sample in which the movement passes a multiple of BLOCK_SPAN_K is a block of its own
+        marks = np.unique(np.floor(moved / BLOCK_SPAN_K + 1e-9).astype(int), return_index=True)[1][1:]
+        starts = np.unique(np.concatenate(([0], marks - 1, marks)))
+        starts = starts[starts < b - a]
+        ends = np.concatenate((starts[1:], [b - a]))
+        blocks += [(int(a + s0), int(s1 - s0)) for s0, s1 in zip(starts, ends)]
     te = np.array([blk[0] for blk in blocks] + [n_out]) * dt_out
     return blocks, np.asarray(mean_of(te), dtype=float)
 
@@ -163,7 +175,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     t_fine = np.linspace(0.0, t_out[-1], max(2, min(len(t_out), 200000)))
     die_fine = fx.die_temperature(t_fine, np.asarray(scn.temperature(t_fine), dtype=float))
     blocks, temp_blk = parameter_blocks(scn, fx, dt_out, n_out, t_fine, die_fine)
-    case_out = np.asarray(scn.temperature(t_out), dtype=float)
+    case_out = np.asarray(scn.temperature.left_limit(t_out), dtype=float)  # over each sample
     temp_all = np.interp(t_out, t_fine, die_fine) if fx.get("thermal_lag") else case_out
     sig_fine = fx.signals(t_fine, die_fine)
     nz = scn.noise
@@ -202,7 +214,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     quad_V = noisegen.quantize(get("quad_V")[:, 0], lsb)
     channels = dict(
         time_s=t_out, temperature_C=case_out,
-        rate_dps=rate_V / sf_nom, rate_V=rate_V, rate_true_dps=np.asarray(scn.rate(t_out), dtype=float),
+        rate_dps=rate_V / sf_nom, rate_V=rate_V, rate_true_dps=np.asarray(scn.rate.left_limit(t_out), dtype=float),
         quadrature_V=quad_V, drive_amplitude_V=get("amp_V")[:, 0], agc_effort_V=get("agc_V")[:, 0],
         drive_frequency_Hz=get("freq_Hz")[:, 0],
     )

@@ -30,9 +30,10 @@ clamped (``u`` a held input). Each is discretised exactly for the step and for a
 floor, is redone in sub-steps (:class:`fmvmg_sim.compiled.Refinement`). The rate enters through
 first-order-hold inputs ``W A`` and ``W Y`` (A and Y held over the step). White noises enter
 through their exact one-step covariance, so the step can be as long as an output interval.
-Integrals ``J`` of the amplitude estimate and of the output LPF give integrate-and-dump outputs.
+Integrals ``J`` of the amplitude estimate and of the output LPF give integrate-and-dump outputs, and
+with the integral ``K`` of the PI's integrator, the PI output's exact mean over a step.
 
-State: ``[A, s1, s2, I, J, Yr, Yi, Sr1, Sr2, Si1, Si2, Jr, Ji]`` (``Y`` the sense mode's slow part).
+State: ``[A, s1, s2, I, J, Yr, Yi, Sr1, Sr2, Si1, Si2, Jr, Ji, K]`` (``Y`` the sense mode's slow part).
 """
 
 from __future__ import annotations
@@ -45,8 +46,8 @@ from ..carrier.layout import Layout
 from ..diagram import Diagram
 from ..errors import InputError
 
-N = 13
-IA, IS1, IS2, II, IJ, IYR, IYI, ISR, ISR2, ISI, ISI2, IJR, IJI = range(N)
+N = 14
+IA, IS1, IS2, II, IJ, IYR, IYI, ISR, ISR2, ISI, ISI2, IJR, IJI, IK = range(N)
 N_U = 7  # FOH inputs: [vref, W A, W Yr, W Yi, dkq A, dkq Yr, dkq Yi] (dkq: extra quadrature stiffness, N/m)
 N_NOISE = N
 #: Sub-steps of a refined step (a crossing into or out of the PI's clamp, the normaliser's floor).
@@ -202,6 +203,7 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
             Bu[rows, 0] += Bo * ku * u_vref
             bu[rows] = Bo * ku
         M[IJR, ISR], M[IJI, ISI] = 1.0, 1.0
+        M[IK, II] = 1.0
         return M, Bu, Bc, bu
 
     out = {}

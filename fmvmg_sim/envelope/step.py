@@ -20,7 +20,7 @@ from blocks.ops import numpy_ops
 
 from ..carrier.layout import Layout, dot, matvec
 from ..compiled import Refinement, StepModel
-from .model import IA, II, IJ, IJI, IJR, IS1, ISI, ISR, IYI, IYR, N, N_SUB, N_U, PARAMS, piece_field
+from .model import IA, II, IJ, IJI, IJR, IK, IS1, IYI, IYR, N, N_SUB, PARAMS, piece_field
 
 STATE = Layout([
     ("x", (N,)), ("u", ()), ("acc_t", ()), ("acc_u", ()),
@@ -32,7 +32,7 @@ INPUTS = Layout([("noise", (N,)), ("rate", (2,)), ("vref_f", (2,)), ("quad_rel",
 N_IN = INPUTS.size
 #: Integrate-and-dump accumulators, zeroed after each output sample.
 RESET = ("acc_t", "acc_u")
-_J = (IJ, IJR, IJI)
+_J = (IJ, IJR, IJI, IK)
 TWO_PI = 6.283185307179586
 
 
@@ -88,12 +88,20 @@ def _plus(x, g, s):
     return [x[i] + g[i] * s for i in range(N)]
 
 
-def _outputs(xs, p, w, x1, u0, u1, rho1, dt, ops):
-    """Integrate-and-dump outputs after a step (or sub-step) of length ``dt`` from PI output ``u0`` (just after
-    its start, a set-point step included) to ``x1``, ``u1``."""
+def _u_integral(p, x, x1, v0, v1, clamped, U, dt, ops):
+    """The PI output's integral over a step from ``x`` to ``x1``: the held limit, or Kp (Vref - r) + Ki I
+    integrated exactly through the integrals J (of r) and K (of I)."""
+    P = PARAMS.unpack
+    free = P(p, "kp") * (0.5 * (v0 + v1) * dt - (x1[IJ] - x[IJ])) + P(p, "ki") * (x1[IK] - x[IK])
+    return ops.if_else(clamped > 0, U * dt, free)
+
+
+def _outputs(xs, p, w, x1, u_int, u1, rho1, dt, ops):
+    """Integrate-and-dump outputs after a step (or sub-step) of length ``dt`` ending in ``x1``, ``u1``, the PI
+    output's integral over it ``u_int``."""
     S, P = STATE.unpack, PARAMS.unpack
     acc_t = S(xs, "acc_t") + dt
-    acc_u = S(xs, "acc_u") + 0.5 * (u0 + u1) * dt
+    acc_u = S(xs, "acc_u") + u_int
     inv_t = 1.0 / acc_t
     phi1 = INPUTS.unpack(w, "phase")
     c, sn = ops.cos(phi1), ops.sin(phi1)
@@ -147,7 +155,7 @@ def step(xs, p, w, ops=numpy_ops):
     x = _restart(xs, ops)
     fac = INPUTS.unpack(w, "vref_f")
     v0, v1 = P(p, "vref0") * fac[0], P(p, "vref0") * fac[1]
-    u0, high0, low0, hold0 = _pi_state(p, x, v0)
+    _, high0, low0, hold0 = _pi_state(p, x, v0)
     sat0 = high0 + low0
     U = ops.if_else(high0, P(p, "u_max"), P(p, "u_min"))
     in0, in1 = _hold_inputs(p, w, x, 0, 1)
@@ -162,7 +170,8 @@ def step(xs, p, w, ops=numpy_ops):
     changed = (ops.fabs(high1 - high0) + ops.fabs(low1 - low0) + sat0 * ops.fabs(hold1 - hold0)
                + (x[IA] < af) + (x1[IA] < af))
     refine = ops.if_else(changed > 0, 1.0, 0.0)
-    return x1 + _outputs(xs, p, w, x1, _clamp(u0, p, ops), u1, 1.0, P(p, "h"), ops) + [refine]
+    u_int = _u_integral(p, x, x1, v0, v1, sat0, U, P(p, "h"), ops)
+    return x1 + _outputs(xs, p, w, x1, u_int, u1, 1.0, P(p, "h"), ops) + [refine]
 
 
 def substep(xs, p, wj, ops=numpy_ops):
@@ -218,8 +227,9 @@ def substep(xs, p, wj, ops=numpy_ops):
     ln = matvec(P(p, "L"), INPUTS.unpack(w, "noise"))
     x1 = [ops.if_else(sat0 > 0, held[i], free[i]) + last * ln[i] for i in range(N)]
     u1 = _clamp(_pi_state(p, x1, v1)[0], p, ops)
-    return x1 + _outputs(xs, p, w, x1, _clamp(u_free0, p, ops), u1, rho(x1[IA]), P(p, "h") * (1.0 / N_SUB),
-                         ops) + [0.0]
+    dt = P(p, "h") * (1.0 / N_SUB)
+    u_int = _u_integral(p, x, x1, v0, v1, sat0, U, dt, ops)
+    return x1 + _outputs(xs, p, w, x1, u_int, u1, rho(x1[IA]), dt, ops) + [0.0]
 
 
 ENVELOPE_MODEL = StepModel("fmvmg_envelope", STATE, PARAMS, N_IN, step, reset=RESET,
