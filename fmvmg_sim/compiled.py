@@ -400,12 +400,7 @@ class StepModel:
         -------
         casadi.Function
         """
-        x = ca.SX.sym("x", self.state.size)
-        p = ca.SX.sym("p", self.params.size)
-        w = ca.SX.sym("w", self.n_inputs)
-        out = self.step([x[i] for i in range(self.state.size)], [p[i] for i in range(self.params.size)],
-                        [w[i] for i in range(self.n_inputs)], CasadiOps())
-        return ca.Function(f"{self.name}_step", [x, p, w], [ca.vertcat(*out)])
+        return self._symbolic(self.step, self.n_inputs, "step")
 
     def casadi_substep(self) -> ca.Function:
         """The symbolic sub-step of :attr:`refine` (inputs extended by the sub-step index).
@@ -414,12 +409,16 @@ class StepModel:
         -------
         casadi.Function
         """
+        return self._symbolic(self.refine.substep, self.n_inputs + 1, "sub")
+
+    def _symbolic(self, fn: Callable, n_inputs: int, suffix: str) -> ca.Function:
+        """``fn(x, p, w, ops)`` built with CasADi symbols as ``<name>_<suffix>(x, p, w)``."""
         x = ca.SX.sym("x", self.state.size)
         p = ca.SX.sym("p", self.params.size)
-        w = ca.SX.sym("w", self.n_inputs + 1)
-        out = self.refine.substep([x[i] for i in range(self.state.size)], [p[i] for i in range(self.params.size)],
-                                  [w[i] for i in range(self.n_inputs + 1)], CasadiOps())
-        return ca.Function(f"{self.name}_sub", [x, p, w], [ca.vertcat(*out)])
+        w = ca.SX.sym("w", n_inputs)
+        out = fn([x[i] for i in range(self.state.size)], [p[i] for i in range(self.params.size)],
+                 [w[i] for i in range(n_inputs)], CasadiOps())
+        return ca.Function(f"{self.name}_{suffix}", [x, p, w], [ca.vertcat(*out)])
 
     def refined_function(self) -> ca.Function:
         """The step with its refinement as one function (for the virtual machine): the flagged

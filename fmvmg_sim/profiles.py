@@ -45,19 +45,7 @@ class PiecewiseProfile:
         if not self.sines and np.all(self.values == self.values[0]):  # constant: the common case of long runs
             out = np.full(t.shape, float(self.values[0]))
             return out if out.ndim else float(out)
-        # right-continuous steps: use the last breakpoint at or before t
-        idx = np.searchsorted(self.times_s, t, side="right") - 1
-        idx = np.clip(idx, 0, len(self.times_s) - 1)
-        nxt = np.clip(idx + 1, 0, len(self.times_s) - 1)
-        t0, t1 = self.times_s[idx], self.times_s[nxt]
-        v0, v1 = self.values[idx], self.values[nxt]
-        span = np.where(t1 > t0, t1 - t0, 1.0)
-        frac = np.where(t1 > t0, np.clip((t - t0) / span, 0.0, 1.0), 0.0)
-        out = v0 + frac * (v1 - v0)
-        for (ta, tb, amp, f, ph) in self.sines:
-            on = (t >= ta) & (t < tb)
-            out = out + np.where(on, amp * np.sin(2 * np.pi * f * (t - ta) + ph), 0.0)
-        return out if out.ndim else float(out)
+        return self._evaluate(t, "right")
 
     def left_limit(self, t_s):
         """Value just before ``t_s`` (the value before a step at ``t_s``; sines included).
@@ -70,16 +58,22 @@ class PiecewiseProfile:
         -------
         float or ndarray
         """
-        t = np.asarray(t_s, dtype=float)
-        idx = np.clip(np.searchsorted(self.times_s, t, side="left") - 1, 0, len(self.times_s) - 1)
+        return self._evaluate(np.asarray(t_s, dtype=float), "left")
+
+    def _evaluate(self, t: np.ndarray, side: str):
+        """The right-continuous value (``side="right"``: a step at ``t`` taken) or the left limit."""
+        # the last breakpoint at or before t (right), or strictly before it (left)
+        idx = np.clip(np.searchsorted(self.times_s, t, side=side) - 1, 0, len(self.times_s) - 1)
         nxt = np.clip(idx + 1, 0, len(self.times_s) - 1)
         t0, t1 = self.times_s[idx], self.times_s[nxt]
+        v0, v1 = self.values[idx], self.values[nxt]
         span = np.where(t1 > t0, t1 - t0, 1.0)
         frac = np.where(t1 > t0, np.clip((t - t0) / span, 0.0, 1.0), 0.0)
-        out = self.values[idx] + frac * (self.values[nxt] - self.values[idx])
-        out = np.where(t <= self.times_s[0], self.values[0], out)
+        out = v0 + frac * (v1 - v0)
+        if side == "left":
+            out = np.where(t <= self.times_s[0], self.values[0], out)
         for (ta, tb, amp, f, ph) in self.sines:
-            on = (t > ta) & (t <= tb)
+            on = ((t >= ta) & (t < tb)) if side == "right" else ((t > ta) & (t <= tb))
             out = out + np.where(on, amp * np.sin(2 * np.pi * f * (t - ta) + ph), 0.0)
         return out if out.ndim else float(out)
 

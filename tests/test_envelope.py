@@ -128,8 +128,8 @@ def test_temperature_interpolation_of_the_discretised_model_is_accurate():
         Pd = PARAMS.pack(operating_params(build_diagram(dev, T), 0.01, on))
         for name, sl in PARAMS.slices.items():
             if name == "L":  # compare the covariances the factors stand for
-                n = PARAMS.shapes["L"][0]
-                Li, Ld = Pi[sl].reshape(n, n), Pd[sl].reshape(n, n)
+                shape = PARAMS.shapes["L"]
+                Li, Ld = Pi[sl].reshape(shape), Pd[sl].reshape(shape)
                 Qi, Qd = Li @ Li.T, Ld @ Ld.T
                 d = np.sqrt(np.clip(np.diag(Qd), 1e-300, None))
                 assert np.max(np.abs(Qi - Qd) / np.outer(d, d)) <= 1e-4, (T, name)  # in correlation units

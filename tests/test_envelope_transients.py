@@ -16,7 +16,7 @@ from fmvmg_sim.diagram import build_diagram
 from fmvmg_sim.envelope.engine import run_envelope
 from fmvmg_sim.scenario import load_scenario
 
-from .conftest import REPO
+from .conftest import scenario_text
 
 DROP = "[vref]\nsegments = [ { hold_s = 0.2 }, { step_to_factor = 0.1 }, { hold_s = 0.4 }, { step_to_factor = 1.0 } ]\n"
 
@@ -28,29 +28,12 @@ def _run(path, fidelity, overrides=()):
 
 @pytest.fixture(scope="module")
 def scenario_file(tmp_path_factory):
-    """Write a config-A scenario (noise off, steady start at 25 C) with a given body."""
+    """Write a config-A scenario (noise off, steady start at 25 C unless told) with a given body."""
     root = tmp_path_factory.mktemp("transients")
 
     def make(name, body, duration_s, output_rate_Hz, state="steady", temperature="start_C = 25.0"):
         p = root / f"{name}.toml"
-        p.write_text(f"""
-[scenario]
-name = "{name}"
-device_file = "{REPO / 'scenarios' / 'devices' / 'fmvmg_a.toml'}"
-duration_s = {duration_s}
-output_rate_Hz = {output_rate_Hz}
-seed = 1
-[initial]
-state = "{state}"
-[temperature]
-{temperature}
-[noise]
-brownian = false
-electronic = false
-flicker = false
-quantization = false
-rate_random_walk = false
-""" + body)
+        p.write_text(scenario_text(name, duration_s, output_rate_Hz, state, temperature) + body)
         return p
     return make
 

@@ -8,6 +8,8 @@ from fmvmg_sim.envelope.engine import BLOCK_SPAN_K, parameter_blocks
 from fmvmg_sim.profiles import PiecewiseProfile
 from fmvmg_sim.scenario import load_scenario
 
+from .conftest import scenario_text
+
 #: Holds, a drop to a tenth and back (steps), a ramp, and a sine.
 PROFILE = PiecewiseProfile(np.array([0, 0.2, 0.2, 0.6, 0.6, 1.0, 2.0]), np.array([1, 1, 0.1, 0.1, 1, 1, 3.0]),
                            [(1.0, 1.5, 2.0, 7.0, 0.3)])
@@ -48,19 +50,7 @@ def test_step_lines_of_a_constant_are_the_constant():
 
 def _blocks(tmp_path, temperature, duration_s, rate_Hz, effects=""):
     path = tmp_path / "b.toml"
-    path.write_text(f"""
-[scenario]
-name = "b"
-device_file = "devices/fmvmg_a.toml"
-duration_s = {duration_s}
-output_rate_Hz = {rate_Hz}
-[temperature]
-{temperature}
-{effects}
-""")
-    (tmp_path / "devices").mkdir(exist_ok=True)
-    from .conftest import REPO
-    (tmp_path / "devices" / "fmvmg_a.toml").write_text((REPO / "scenarios" / "devices" / "fmvmg_a.toml").read_text())
+    path.write_text(scenario_text("b", duration_s, rate_Hz, temperature=temperature) + effects)
     scn = load_scenario(path, fidelity="envelope")
     fx = EffectSet(scn.effects)
     dt = 1.0 / rate_Hz

@@ -25,8 +25,7 @@ from ..diagram import build_diagram
 from ..effects import EffectSet
 from ..result import SimResult
 from ..scenario import Scenario
-from ..carrier.discretize import batched_factor
-from .model import IA, PARAMS, N, operating_params, steady_vector
+from .model import IA, N_NOISE, PARAMS, N, noise_factor, operating_params, steady_vector
 from .step import ENVELOPE_MODEL, INPUTS, N_IN, STATE
 
 #: Spacing of the temperature grid on which the averaged model is discretised (K).
@@ -49,12 +48,11 @@ class _ParamTable:
             n = max(4, int(np.ceil((t_hi - t_lo) / T_GRID_K)) + 3)
             grid = np.linspace(t_lo - T_GRID_K, t_hi + T_GRID_K, n)
         self.grid = grid
-        rows, covs, self.extra = [], [], []
+        rows, covs = [], []
         for T in grid:
             op = operating_params(build_diagram(device, float(T)), h_s, noise_on)
             rows.append(PARAMS.pack(op))
             covs.append(op["Q"])
-            self.extra.append(op)
         self.table = np.array(rows)
         self.cov = np.array(covs)
         self.spline = CubicSpline(grid, self.table, axis=0) if len(grid) > 1 else None
@@ -66,9 +64,10 @@ class _ParamTable:
         T = np.atleast_1d(T)
         if self.spline is None:
             return np.repeat(self.table, len(T), axis=0)
-        P = self.spline(T)
-        P[:, PARAMS.slices["L"]] = batched_factor(self.cov_spline(T)).reshape(len(T), -1)
-        return P
+        Tu, back = np.unique(T, return_inverse=True)  # holds: one evaluation for all their blocks
+        P = self.spline(Tu)
+        P[:, PARAMS.slices["L"]] = noise_factor(self.cov_spline(Tu)).reshape(len(Tu), -1)
+        return P[back.ravel()]
 
 
 def parameter_blocks(scn: Scenario, fx: EffectSet, dt_out: float, n_out: int, t_fine: np.ndarray,
@@ -249,7 +248,7 @@ def _inputs(scn: Scenario, rng, any_noise: bool, t_edges: np.ndarray, t_fine: np
     W = np.empty((n, N_IN))
     col = {name: sl.start for name, sl in INPUTS.slices.items()}
     # float32 draws: half the cost of float64, and far finer than any noise level here
-    W[:, :N] = rng.standard_normal((n, N), dtype=np.float32) if any_noise else 0.0
+    W[:, :N_NOISE] = rng.standard_normal((n, N_NOISE), dtype=np.float32) if any_noise else 0.0
     for name, profile in (("rate", scn.rate), ("vref_f", scn.vref_factor)):
         W[:, col[name]], W[:, col[name] + 1] = profile.step_lines(t_edges)
     W[:, col["rate"]:col["rate"] + 2] *= np.pi / 180.0

@@ -49,7 +49,9 @@ from ..errors import InputError
 N = 14
 IA, IS1, IS2, II, IJ, IYR, IYI, ISR, ISR2, ISI, ISI2, IJR, IJI, IK = range(N)
 N_U = 7  # FOH inputs: [vref, W A, W Yr, W Yi, dkq A, dkq Yr, dkq Yi] (dkq: extra quadrature stiffness, N/m)
-N_NOISE = N
+#: Standard normals per step: one per state but the integral K, whose own share of the step's noise (the
+#: integral of the integrator's noise within a step) is left out: K only makes the PI output's mean exact.
+N_NOISE = N - 1
 #: Sub-steps of a refined step (a crossing into or out of the PI's clamp, the normaliser's floor).
 N_SUB = 32
 
@@ -78,7 +80,7 @@ def piece_field(name: str, piece: str, level: str) -> str:
 PARAMS = Layout(
     [(piece_field(name, piece, level), shape) for level in LEVELS for piece in PIECES for name, shape in _PIECE_FIELDS]
     + [
-        ("L", (N, N)),
+        ("L", (N, N_NOISE)),
         ("vref0", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
         ("R_I", (2,)), ("R_Q", (2,)), ("g_out", ()), ("h", ()),
         ("omega", ()), ("b_u", ()), ("b_A", ()), ("b_Y", (2,)), ("k_quad", ()),
@@ -114,7 +116,8 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
     -------
     dict
         Fields of :data:`PARAMS`, plus ``steady`` (the :class:`~fmvmg_sim.averaged.SteadyState`),
-        ``x_steady`` (the state at the zero-rate steady state) and ``Q`` (the one-step noise covariance).
+        ``x_steady`` (the state at the zero-rate steady state) and ``Q`` (the one-step noise covariance of
+        the first :data:`N_NOISE` states).
     """
     if dg.carrier_mode != "normalized":
         raise InputError("the envelope engine models the 'normalized' carrier only; use --fidelity carrier",
@@ -230,8 +233,8 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
         Gn[i1:i2 + 1, 4:6] = np.outer(Bo, _cmat(Hse)[comp])
     q = np.array([psd_fd * abs(1 / Dd) ** 2 if br else 0.0, (dg.rectifier.gain * e_d) ** 2 / 2 if el else 0.0,
                   psd_fs if br else 0.0, psd_fs if br else 0.0, e_s ** 2 if el else 0.0, e_s ** 2 if el else 0.0])
-    Q = noise_covariance(M_free, Gn, np.diag(q), h_s)
-    L = batched_factor(Q[None])[0]
+    Q = noise_covariance(M_free, Gn, np.diag(q), h_s)[:N_NOISE, :N_NOISE]
+    L = noise_factor(Q)
     # the carrier normaliser's floor as a drive amplitude: below it the carrier is (Vdac / floor) v_ps
     a_floor = dg.normaliser_floor_V() * abs(C0) / (dg.vdac_V * abs(Hx * Hps))
     x_ss, _ = steady_vector(dg)
@@ -242,6 +245,25 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
                omega=w, b_u=fu.imag, b_A=fA.imag, b_Y=list(_cmat(kap0)[1]), k_quad=r.k_quad_N_per_m,
                y_A=[yA.real, yA.imag], a_floor=a_floor, steady=ss, x_steady=x_ss, Q=Q)
     return out
+
+
+def noise_factor(Q: np.ndarray) -> np.ndarray:
+    """The step's noise factor from the covariance of the first :data:`N_NOISE` states (stacked or not):
+    ``L L^T = Q``, with a zero row for K.
+
+    Parameters
+    ----------
+    Q : ndarray, shape (..., N_NOISE, N_NOISE)
+
+    Returns
+    -------
+    ndarray, shape (..., N, N_NOISE)
+    """
+    Q = np.asarray(Q)
+    Lq = batched_factor(Q.reshape(-1, N_NOISE, N_NOISE))
+    L = np.zeros((len(Lq), N, N_NOISE))
+    L[:, :N_NOISE] = Lq
+    return L.reshape(Q.shape[:-2] + (N, N_NOISE))
 
 
 def steady_vector(dg: Diagram, rate_rad_s: float = 0.0, vref_factor: float = 1.0) -> tuple[np.ndarray, object]:

@@ -20,15 +20,15 @@ from blocks.ops import numpy_ops
 
 from ..carrier.layout import Layout, dot, matvec
 from ..compiled import Refinement, StepModel
-from .model import IA, II, IJ, IJI, IJR, IK, IS1, IYI, IYR, N, N_SUB, PARAMS, piece_field
+from .model import IA, II, IJ, IJI, IJR, IK, IS1, IYI, IYR, N, N_NOISE, N_SUB, PARAMS, piece_field
 
 STATE = Layout([
     ("x", (N,)), ("u", ()), ("acc_t", ()), ("acc_u", ()),
     ("rate_V", ()), ("quad_V", ()), ("amp_V", ()), ("agc_V", ()), ("freq_Hz", ()), ("refine", ()),
 ])
-#: Per-step inputs: N standard normals; the rate (rad/s), set-point factor and relative quadrature-stiffness
+#: Per-step inputs: N_NOISE standard normals; the rate (rad/s), set-point factor and relative quadrature-stiffness
 #: change at the start and at the end of the step; the demodulation reference phase (rad) at its end.
-INPUTS = Layout([("noise", (N,)), ("rate", (2,)), ("vref_f", (2,)), ("quad_rel", (2,)), ("phase", ())])
+INPUTS = Layout([("noise", (N_NOISE,)), ("rate", (2,)), ("vref_f", (2,)), ("quad_rel", (2,)), ("phase", ())])
 N_IN = INPUTS.size
 #: Integrate-and-dump accumulators, zeroed after each output sample.
 RESET = ("acc_t", "acc_u")
