@@ -41,11 +41,7 @@ class PiecewiseProfile:
         -------
         float or ndarray
         """
-        t = np.asarray(t_s, dtype=float)
-        if not self.sines and np.all(self.values == self.values[0]):  # constant: the common case of long runs
-            out = np.full(t.shape, float(self.values[0]))
-            return out if out.ndim else float(out)
-        return self._evaluate(t, "right")
+        return self._evaluate(np.asarray(t_s, dtype=float), "right")
 
     def left_limit(self, t_s):
         """Value just before ``t_s`` (the value before a step at ``t_s``; sines included).
@@ -62,6 +58,9 @@ class PiecewiseProfile:
 
     def _evaluate(self, t: np.ndarray, side: str):
         """The right-continuous value (``side="right"``: a step at ``t`` taken) or the left limit."""
+        if not self.sines and np.all(self.values == self.values[0]):  # constant: the common case of long runs
+            out = np.full(t.shape, float(self.values[0]))
+            return out if out.ndim else float(out)
         # the last breakpoint at or before t (right), or strictly before it (left)
         idx = np.clip(np.searchsorted(self.times_s, t, side=side) - 1, 0, len(self.times_s) - 1)
         nxt = np.clip(idx + 1, 0, len(self.times_s) - 1)
