@@ -16,6 +16,10 @@ that
 The arithmetic of each unit is the expression graph's, operation by operation, so a
 unit gives the same numbers alone or among others.
 
+A model may also give a :class:`Refinement`: the roll-out redoes the steps its step function
+flags (a piecewise-linear model crossing from one piece into another) in sub-steps of a second
+function, generated the same way and called only for those steps.
+
 Libraries are cached under ``$FMVMG_CACHE_DIR`` (default ``~/.cache/fmvmg_sim``),
 keyed by a hash of the C source, the compiler command and the CPU; the file name also
 carries the SHA-256 of the library itself, written in one atomic rename. An entry is
@@ -42,6 +46,8 @@ from typing import Callable
 
 import casadi as ca
 import numpy as np
+
+from blocks.ops import numpy_ops
 
 from .carrier.layout import Layout
 
@@ -370,7 +376,6 @@ class StepModel:
         ndarray
             The next state.
         """
-        from blocks.ops import numpy_ops
         y = np.asarray(self.step(list(x), list(p), list(w), numpy_ops), dtype=float)
         r = self.refine
         if r is None or y[self.state.slices[r.flag].start] == 0:

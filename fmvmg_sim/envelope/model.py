@@ -34,6 +34,12 @@ Integrals ``J`` of the amplitude estimate and of the output LPF give integrate-a
 with the integral ``K`` of the PI's integrator, the PI output's exact mean over a step.
 
 State: ``[A, s1, s2, I, J, Yr, Yi, Sr1, Sr2, Si1, Si2, Jr, Ji, K]`` (``Y`` the sense mode's slow part).
+
+A further clamped block (a force-to-rebalance PI, a PLL's loop filter) is one more dimension of
+pieces: a piece per combination of free and clamped blocks, each the system with the clamped
+blocks' outputs as held inputs, discretised at both levels (:data:`PIECES`, :func:`piece_field`);
+the step picks the piece from each block's ``clamp_state`` at its start and flags a change at
+its end, and the refinement needs nothing more.
 """
 
 from __future__ import annotations
