@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fmvmg_sim.diagnosis.benchmark import detection_claim, size_ratio
+from fmvmg_sim.validation.scoring import detection_claim, size_ratio
 from fmvmg_sim.diagnosis.detection import POWER, pass_rate
 from fmvmg_sim.diagnosis.pipeline import diagnose
 from fmvmg_sim.diagnosis.report import detection_lines
