@@ -28,6 +28,9 @@ from .step import ENVELOPE_MODEL, N_IN, STATE
 
 #: Spacing of the temperature grid on which the averaged model is discretised (K).
 T_GRID_K = 5.0
+#: Largest spacing of the board-minus-die offset grid (K): the electronics move the parameters by a few
+#: per cent over it, so a quadratic through three nodes is accurate to about 1e-7.
+OFFSET_GRID_K = 10.0
 #: Target length of a parameter block (s).
 BLOCK_S = 1.0
 #: Simulated seconds per compiled call.
@@ -38,8 +41,8 @@ class _ParamTable:
     """Packed parameter vectors of the averaged model as a smooth function of die and board temperature.
 
     A cubic spline in the die temperature on a :data:`T_GRID_K` grid; when the board does not follow the
-    die (thermal lag), a tensor-product spline with the board-minus-die offset on a grid of the same spacing
-    (at least three nodes) spanning the offsets the run visits.
+    die (thermal lag), a tensor-product spline with the board-minus-die offset on a grid of at least three
+    nodes, at most :data:`OFFSET_GRID_K` apart, spanning the offsets the run visits.
     """
 
     def __init__(self, device, h_s, noise_on, t_lo, t_hi, off_lo=0.0, off_hi=0.0):
@@ -52,7 +55,7 @@ class _ParamTable:
         if off_hi - off_lo < 1e-6:
             self.offsets = np.array([0.5 * (off_lo + off_hi)])
         else:
-            self.offsets = np.linspace(off_lo, off_hi, max(3, int(np.ceil((off_hi - off_lo) / T_GRID_K)) + 1))
+            self.offsets = np.linspace(off_lo, off_hi, max(3, int(np.ceil((off_hi - off_lo) / OFFSET_GRID_K)) + 1))
         tables, covs, self.extra = [], [], []
         for T in grid:
             ops = [operating_params(build_diagram(device, float(T), board_C=float(T + o)), h_s, noise_on)
