@@ -20,6 +20,7 @@ from fmvmg_sim.envelope import engine as envelope_engine
 from fmvmg_sim.envelope.engine import run_envelope
 from fmvmg_sim.scenario import load_scenario
 
+from .closed_forms import zero_rate_output_dps
 from .conftest import REPO
 
 DEVICES = ("fmvmg_a", "fmvmg_b", "dualmass_004")
@@ -162,33 +163,14 @@ CYCLE = ["temperature.segments=[{hold_s=60.0},{ramp_to_C=45.0,rate_C_per_min=1.0
          "{ramp_to_C=25.0,rate_C_per_min=1.0},{hold_s=600.0}]"]
 
 
-def _electronic_phase_rad(dev, board_C, f_Hz):
-    """Phase of the sense chain behind the demodulation reference, from the amplifier and phase-shifter laws.
-
-    Each amplifier lags by atan(G f / GBW(T)); the reference is the drive amplifier's output through the
-    RC all-pass (lead pi - 2 atan(w RC(T))) brought to a fixed amplitude, whose fundamental moves by 3/4
-    of the all-pass's phase error (the fundamental of v_ps / |(v_x, v_ps)| when v_x and v_ps are off
-    quadrature by e is -sin(theta + 3e/4)).
-    """
-    ci, dT = dev.values["circuit"], board_C - dev.reference_temperature_C
-
-    def lag(a):
-        return np.arctan(abs(a["gain"]) * f_Hz / (a["gbw_Hz"] * (1 + a["gbw_tc_per_K"] * dT)))
-
-    ps = ci["phase_shifter"]
-    rc = np.tan(np.pi / 4 - ps["trim_rad"] / 2) / (2 * np.pi * ps["design_frequency_Hz"]) * (1 + ps["rc_tc_per_K"] * dT)
-    lead_error = (np.pi - 2 * np.arctan(2 * np.pi * f_Hz * rc)) - np.pi / 2
-    return lag(ci["sense_amp1"]) + lag(ci["sense_amp2"]) - lag(ci["drive_amp"]) + 0.75 * lead_error
-
-
 def test_bias_departs_from_the_die_law_by_the_closed_form_electronic_phase(make_scenario):
     """A 25 -> 45 -> 25 C cycle at 1 K/min with the die 600 s behind the case (envelope engine, noise off).
 
     The drive frequency reads the die: it is what the same cycle without lag gives at that die
     temperature. The bias is not: it departs from the no-lag bias at the same die temperature by
-    ``-Omega_q cos(phi_s) [phi_el(T_board) - phi_el(T_die)]`` (this wiring's zero-rate output is
-    ``Omega_c cos(phi) - Omega_q sin(phi)``), so bias against drive frequency is a loop, open by the
-    board term, where a single temperature would give one curve.
+    the closed form's ``Omega_c cos(phi) - Omega_q sin(phi)`` with the electronic phase at the board instead of
+    the die (about ``-Omega_q [phi_el(T_board) - phi_el(T_die)]``), so bias against drive frequency is a loop,
+    open by the board term, where a single temperature would give one curve.
     """
     lag_body = LAG_STEP.replace("offset_K = 0.5", "offset_K = 0.0")
     lagged, plain = (run_envelope(load_scenario(make_scenario(body, name=name, duration_s=4260.0, output_rate_Hz=2.0,
@@ -212,18 +194,8 @@ def test_bias_departs_from_the_die_law_by_the_closed_form_electronic_phase(make_
     # the drive frequency reads the die to 10 mK (-0.92 Hz/K) while the board is up to 10 K away; what is left
     # is the drive mode's response time 2 Q_d / w_d = 0.2 s to the ramping frequency (4 mHz at 1 K/min)
     assert np.max(np.abs(f - np.interp(die, Tp[up], fp[up]))) < 0.01
-    # closed form of the bias's board term: quadrature rate and sense phase at the die, electronics at the board
-    T0 = dev.reference_temperature_C
-    omega_q = dev.values["mechanics"]["quadrature_rate_dps"] * (
-        1 + dev.values["thermal"]["quadrature_tc_per_K"] * (die - T0))
-    grid = np.linspace(24.0, 46.0, 12)
-    cos_phi_s = []
-    for T in grid:
-        r = build_diagram(dev, T).resonator
-        ws, w = 2 * np.pi * r.f_sense_Hz, 2 * np.pi * steady_state(build_diagram(dev, T)).f_Hz
-        cos_phi_s.append(np.cos(np.arctan2(ws * w / r.q_sense, ws ** 2 - w ** 2)))
-    closed = -omega_q * np.interp(die, grid, cos_phi_s) * (
-        _electronic_phase_rad(dev, board, f) - _electronic_phase_rad(dev, die, f))
+    # closed form of the bias's board term: the MEMS at the die, the electronics at the board or at the die
+    closed = np.array([zero_rate_output_dps(dev, d, b) - zero_rate_output_dps(dev, d, d) for d, b in zip(die, board)])
     measured = bias - np.interp(die, Tp[up], bp[up])
     peak = np.max(np.abs(closed))
     assert peak * 3600 > 200.0  # deg/h: the board term is large on these ramps (the check is not vacuous)
