@@ -93,7 +93,8 @@ MEANINGS = {
     "circuit.sense_pickoff.c_feedback_F": "charge-amplifier feedback capacitance",
     "circuit.sense_pickoff.c_feedthrough_F": "drive-to-sense feedthrough capacitance",
     "circuit.sense_pickoff.sign": "wiring polarity of the sense output",
-    "circuit.sense_pickoff.c_feedthrough_tc_per_K": "feedthrough temperature coefficient (`feedthrough`), at the board temperature",
+    "circuit.sense_pickoff.c_feedthrough_tc_per_K":
+        "feedthrough temperature coefficient (`feedthrough`), at the board temperature",
     "circuit.sense_amp1.gain": "first sense amplifier gain (block 11)",
     "circuit.sense_amp1.gbw_Hz": "its gain-bandwidth product",
     "circuit.sense_amp1.gbw_tc_per_K": "GBW temperature coefficient, at the board temperature",
@@ -106,7 +107,8 @@ MEANINGS = {
     "circuit.sense_amp2.gain_tc_per_K": "gain temperature coefficient, at the board temperature",
     "circuit.demodulator.k_per_V": "demodulator multiplier scale (block 13)",
     "circuit.demodulator.phase_trim": "reference phase trim: `auto` (trimmed at 25 C) or a value in rad",
-    "circuit.demodulator.phase_tc_rad_per_K": "demodulation phase drift (`demod_phase_drift`), at the board temperature",
+    "circuit.demodulator.phase_tc_rad_per_K":
+        "demodulation phase drift (`demod_phase_drift`), at the board temperature",
     "circuit.output_lpf.f_c_Hz": "output low-pass corner (block 14, 2nd order)",
     "circuit.output_lpf.gain": "output low-pass gain",
     "noise.sense_input_V_per_sqrtHz": "white noise density at the sense front end",

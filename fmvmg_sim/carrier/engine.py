@@ -166,7 +166,7 @@ class _Unit:
             rows = np.flatnonzero(inv == j)
             ks = rows + k0
             P[rows] = self.plan_for(key, board_key).params(np.deg2rad(self.rate_dps[ks]), self.phase_flicker[ks],
-                                                self.vref_f[ks], self.sig["quad_rel"][ks])
+                                                          self.vref_f[ks], self.sig["quad_rel"][ks])
         return P
 
     def result(self, roll) -> SimResult:
