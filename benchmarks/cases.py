@@ -2,8 +2,8 @@
 
 ``diagnose-benchmark`` spends about half of a run making its cases: each case is simulated, then its
 signature SNR is computed several times (the amplitude search, the whole record, the training window, a
-pair's members), and each SNR calibrates the nominal knobs afresh on records of the same profile. Since
-session 45 those calibrations share their response tables (``cases.make_case``). The named baseline is the
+pair's members), and each SNR calibrates the nominal knobs afresh on records of the same profile. Those
+calibrations share their response tables (``cases.make_case``). The named baseline is the
 same code with every Fitter on its own tables (``cases._make_case`` called outside ``make_case``'s store).
 Both make the same cases, in separate directories; the labels and records must be identical, bit for bit.
 
@@ -22,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fmvmg_sim.diagnosis import cases  # noqa: E402
+from fmvmg_sim.validation import cases  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 MIXES = {"single": cases.CaseMix(p_null=0.0, p_single=1.0), "default": cases.CaseMix(),

@@ -1,4 +1,4 @@
-"""Run the honest compensation comparison (issues 5 and 6) in method groups and merge the results.
+"""Run the honest compensation comparison in method groups and merge the results.
 
 Usage::
 
@@ -8,7 +8,7 @@ Usage::
 ``run`` evaluates one group of methods (``fast``: raw, poly-baseline, physics; ``vmd``:
 vmd-wflp-cssvr; ``emd``: emd-rbf, emd-rbf-ga, emd-rbf-ga-kf; ``vmd-native``: vmd-wflp-cssvr
 without decimation, the measured effect of the 100 Hz fix) and pickles the
-:class:`~fmvmg_sim.compensation.evaluate.Evaluation` to ``OUTDIR/GROUP.pkl``; ``merge`` combines
+:class:`~fmvmg_sim.validation.compensation_eval.Evaluation` to ``OUTDIR/GROUP.pkl``; ``merge`` combines
 the groups found into ``DOCSDIR/compensation_eval.{md,json}`` and the plots. Groups run one
 after the other (the machine has 2 shared cores).
 
@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     m.add_argument("docsdir")
     m.add_argument("--groups", default="fast,vmd,emd")
     a = ap.parse_args(argv)
-    from fmvmg_sim.compensation import evaluate as E
+    from fmvmg_sim.validation import compensation_eval as E
     if a.cmd == "run":
         t0 = time.perf_counter()
         ev = E.evaluate(GROUPS[a.group], seeds=a.seeds, quick=a.quick, method_params=PARAMS[a.group],

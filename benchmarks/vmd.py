@@ -1,7 +1,7 @@
 """Wall time and peak memory of :func:`fmvmg_sim.compensation.vmd.vmd` on a long gyro-like record.
 
 Usage: ``python benchmarks/vmd.py [--n 1000000] [--K 6] [--json]``. Run it alone on the
-machine (it is single-threaded but memory-bandwidth bound). Budget (issue 6): K = 6 on
+machine (it is single-threaded but memory-bandwidth bound). Budget: K = 6 on
 1e6 samples in <= 60 s and <= 2 GB peak resident memory.
 """
 

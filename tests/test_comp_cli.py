@@ -1,4 +1,4 @@
-"""``fmvmg compensate``: outputs per CONTRACTS.md section 3, exit 2 on bad input."""
+"""``fmvmg compensate``: outputs as docs/formats.md gives them, exit 2 on bad input."""
 
 import json
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from fmvmg_sim.compensation import get_method
-from fmvmg_sim.compensation.evaluate import RunCache, _oven_profiles, default_effects
+from fmvmg_sim.validation.compensation_eval import RunCache, _oven_profiles, default_effects
 from fmvmg_sim.compensation.physics import PhysicsCompensator, PhysicsFallbackWarning
 from fmvmg_sim.compensation.poly import PolyBaseline
 from fmvmg_sim.compensation.synthetic import make_record

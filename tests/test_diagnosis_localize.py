@@ -105,7 +105,7 @@ def test_null_replicates_carry_the_calibration_error(tmp_path):
     simulated with knobs drawn from the calibration's posterior and each re-calibrated on the same
     training window, carry the same kind of error. Replicates of the calibrated model itself read against
     it (no estimation error) left the heating regime at z = 3.9 ("unexplained")."""
-    from fmvmg_sim.diagnosis.cases import make_case
+    from fmvmg_sim.validation.cases import make_case
     from fmvmg_sim.diagnosis.pipeline import diagnose
     label = make_case(28, 4242, tmp_path, str(NOMINAL))
     assert not label["effects"]

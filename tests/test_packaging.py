@@ -5,6 +5,7 @@ the package from there in a fresh interpreter whose working directory is elsewhe
 that only exists in a checkout makes it fail (the editable install the suite runs on cannot).
 """
 
+import ast
 import json
 import os
 import shutil
@@ -28,6 +29,26 @@ def test_every_package_is_listed_in_pyproject():
             found.add(".".join(init.parent.relative_to(REPO).parts))
     assert found <= listed, sorted(found - listed)
     assert "fmvmg_sim.scenarios" in listed
+
+
+def test_the_product_never_imports_the_validation_harness():
+    # the harnesses measure the product; a user's command path (everything but the validation package itself
+    # and the command-line faces of its two harness commands) must not depend on them
+    offenders = []
+    for path in (REPO / "fmvmg_sim").rglob("*.py"):
+        rel = path.relative_to(REPO / "fmvmg_sim")
+        if rel.parts[0] == "validation" or rel.as_posix() in ("cli/diagnose_benchmark.py", "cli/compensate_eval.py"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                mod = "." * node.level + (node.module or "")
+                names = [a.name for a in node.names]
+                ours = node.level > 0 or mod.split(".")[0] == "fmvmg_sim"
+                if ours and ("validation" in mod.split(".") or "validation" in names):
+                    offenders.append(f"{rel}: from {mod} import {', '.join(names)}")
+            elif isinstance(node, ast.Import):
+                offenders += [f"{rel}: import {a.name}" for a in node.names if a.name.startswith("fmvmg_sim.validation")]
+    assert not offenders, offenders
 
 
 def test_shipped_scenarios_and_devices_are_real_files():

@@ -1,4 +1,4 @@
-"""``fmvmg compensate RECORD.csv --method M [--train TRAIN.csv] [-o DIR] [--json]`` (CONTRACTS.md section 3).
+"""``fmvmg compensate RECORD.csv --method M [--train TRAIN.csv] [-o DIR] [--json]`` (docs/formats.md).
 
 Fits the method on ``--train`` (held-out, ``in_sample: false``) or, without it, on the
 record itself (``in_sample: true``), compensates the record and writes
@@ -139,7 +139,7 @@ def register(sub) -> None:
     """Add the ``compensate`` sub-command to the ``fmvmg`` parser."""
     p = sub.add_parser("compensate", help="temperature-drift compensation of a record",
                        description=__doc__.splitlines()[0])
-    p.add_argument("record", metavar="RECORD.csv", help="record to compensate (CONTRACTS.md section 2)")
+    p.add_argument("record", metavar="RECORD.csv", help="record to compensate (the record format of docs/formats.md)")
     p.add_argument("--method", required=True, metavar="M",
                    help=f"compensation method, one of: {', '.join(METHOD_NAMES)}")
     p.add_argument("--train", metavar="RECORD.csv", help="fit on this record (held-out evaluation); "

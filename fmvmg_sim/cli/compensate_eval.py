@@ -1,7 +1,7 @@
 """``fmvmg compensate-eval [--methods M,...] [--seeds N] [--quick] [-o DIR] [--json]``.
 
-The honest evaluation of drift compensators (issues 5 and 6; see
-:mod:`fmvmg_sim.compensation.evaluate`): each method is fitted on one simulated oven run and
+The honest evaluation of drift compensators (see
+:mod:`fmvmg_sim.validation.compensation_eval`): each method is fitted on one simulated oven run and
 evaluated on another with a different seed and temperature profile (both directions,
 thermal lag on), over several seeds, with the papers' Allan readings beside readings
 filtering cannot fake, truth errors, bias per degC and the gain/phase at 1, 10 and 50 Hz
@@ -20,7 +20,7 @@ from ..record import atomic_write_text
 
 
 def _parse_methods(text: str) -> list[str]:
-    from ..compensation.evaluate import ALL_METHODS
+    from ..validation.compensation_eval import ALL_METHODS
     if text.strip().lower() == "all":
         return list(ALL_METHODS)
     ms = [m.strip() for m in text.split(",") if m.strip()]
@@ -47,7 +47,7 @@ def _parse_params(items: list[str] | None) -> dict:
 
 def run(args) -> int:
     """Execute ``fmvmg compensate-eval`` with parsed ``args``; returns the exit code."""
-    from ..compensation.evaluate import evaluate, markdown_table, plot_allan, plot_summary, plot_traces
+    from ..validation.compensation_eval import evaluate, markdown_table, plot_allan, plot_summary, plot_traces
     from ..output import OutputFolder
 
     methods = _parse_methods(args.methods)

@@ -17,8 +17,8 @@ def register(sub) -> None:
     p = sub.add_parser("diagnose", help="sim-to-real gap diagnosis of a record", description=(
         "Calibrate the nominal model on a training window, localise the gap against a re-simulated null, "
         "attribute it to library effects on forward-chained held-out blocks, and report the held-out gap "
-        "shrink. Writes DIR/report.json (CONTRACTS.md section 4), DIR/report.md and PNG plots."))
-    p.add_argument("record", help="record CSV (CONTRACTS.md section 2)")
+        "shrink. Writes DIR/report.json (docs/formats.md), DIR/report.md and PNG plots."))
+    p.add_argument("record", help="record CSV (the record format of docs/formats.md)")
     p.add_argument("--scenario", required=True, help="nominal scenario TOML (device, circuit, noise), "
                    "e.g. scenarios/nominal_a.toml")
     p.add_argument("-o", "--out", default=None, help="output folder (default: out/diagnose_<record name>)")

@@ -56,8 +56,8 @@ def main(args) -> int:
     -------
     int
     """
-    from ..diagnosis.benchmark import run_benchmark
-    from ..diagnosis.cases import CaseMix, MixError
+    from ..validation.benchmark import run_benchmark
+    from ..validation.cases import CaseMix, MixError
     from ..errors import InputError
     from ..output import OutputFolder
     from ..paths import resolve_scenario
@@ -77,7 +77,7 @@ def main(args) -> int:
         raise InputError(str(exc), flag) from None
     cases_from = None
     if args.cases_from is not None:
-        from ..diagnosis.benchmark import stored_cases
+        from ..validation.benchmark import stored_cases
         cases_from = Path(args.cases_from)
         if cases_from.resolve() == Path(args.out).resolve():
             raise InputError("must differ from -o (the earlier run's reports and scores are kept)", "--cases-from")
@@ -94,7 +94,7 @@ def main(args) -> int:
     if args.json:
         sys.stdout.write(json.dumps(slim, default=float) + "\n")
     else:
-        from ..diagnosis.benchmark_report import format_scores
+        from ..validation.scores_report import format_scores
         sys.stderr.write(format_scores(sc) + f"\nscores: {Path(args.out) / 'scores.json'} (per-case rows), "
                                              f"{Path(args.out) / 'scores.md'}\n")
     return 0

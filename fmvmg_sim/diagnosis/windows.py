@@ -4,9 +4,9 @@ Forward-chained attribution fits every candidate on the training window of the l
 76 % of its length, :meth:`~.data.Prepared.folds`) and tests it on later blocks. A gap whose evidence lies
 after that window (an oven ramp, a relaxation or a step only the record's end holds) cannot be attributed by
 any forward-chained fit, however strong it is over the whole record: the parameters that would explain it are
-not determined where they are fitted. Of the top-2 misses above the detection limit on thirty fresh benchmark
-seeds, about half were such cases (the benchmark label ``snr_train``, :func:`.cases.training_snr`); the
-diagnoser cannot read that label, so this module finds the same thing from the record alone.
+not determined where they are fitted. Such records are a common cause of a missed effect in the benchmark, whose
+labels say so (:func:`fmvmg_sim.validation.cases.training_snr`); the diagnoser cannot read a label, so this module
+finds the same thing from the record alone.
 
 The statistic is the mean square of each channel's normalised residual of the final model (the nominal model
 when nothing was accepted; fitted on the training window and extrapolated after it), on the training window

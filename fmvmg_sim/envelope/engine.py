@@ -2,8 +2,9 @@
 
 The run is cut into parameter blocks of about a second, ended at every jump of the temperature
 profile and shortened where the temperature moves fast (:func:`parameter_blocks`); each block gets
-the averaged model discretised at its mean die temperature, interpolated (cubic) from operating
-points on a 5 K grid over the temperatures the scenario visits. Per-step inputs are the noise
+the averaged model discretised at its mean die temperature (and, under a thermal lag, the mean offset of
+the board, which stays on the case), interpolated (cubic) from operating points on a 5 K grid over the
+temperatures the scenario visits. Per-step inputs are the noise
 draws, the rate, set-point factor and quadrature change as the start and end values of their
 first-order hold over the step (so a profile's steps and ramps enter at their times), and the
 demodulation-phase flicker.
@@ -30,6 +31,9 @@ from .step import ENVELOPE_MODEL, INPUTS, N_IN, STATE
 
 #: Spacing of the temperature grid on which the averaged model is discretised (K).
 T_GRID_K = 5.0
+#: Largest spacing of the board-minus-die offset grid (K): the electronics move the parameters by a few
+#: per cent over it, so a quadratic through three nodes is accurate to about 1e-7.
+OFFSET_GRID_K = 10.0
 #: Target length of a parameter block (s).
 BLOCK_S = 1.0
 #: Largest die-temperature change within one parameter block (K); faster changes get shorter blocks.
@@ -39,35 +43,62 @@ CALL_S = 600.0
 
 
 class _ParamTable:
-    """Packed parameter vectors of the averaged model as a smooth function of temperature."""
+    """Packed parameter vectors of the averaged model as a smooth function of die and board temperature.
 
-    def __init__(self, device, h_s, noise_on, t_lo, t_hi):
+    A cubic spline in the die temperature on a :data:`T_GRID_K` grid; when the board does not follow the
+    die (thermal lag), a tensor-product spline with the board-minus-die offset on a grid of at least three
+    nodes, at most :data:`OFFSET_GRID_K` apart, spanning the offsets the run visits.
+    """
+
+    def __init__(self, device, h_s, noise_on, t_lo, t_hi, off_lo=0.0, off_hi=0.0):
         if t_hi - t_lo < 1e-6:
             grid = np.array([t_lo])
         else:
             n = max(4, int(np.ceil((t_hi - t_lo) / T_GRID_K)) + 3)
             grid = np.linspace(t_lo - T_GRID_K, t_hi + T_GRID_K, n)
         self.grid = grid
-        rows, covs = [], []
+        if off_hi - off_lo < 1e-6:
+            self.offsets = np.array([0.5 * (off_lo + off_hi)])
+        else:
+            self.offsets = np.linspace(off_lo, off_hi, max(3, int(np.ceil((off_hi - off_lo) / OFFSET_GRID_K)) + 1))
+        tables, covs = [], []
         for T in grid:
-            op = operating_params(build_diagram(device, float(T)), h_s, noise_on)
-            rows.append(PARAMS.pack(op))
-            covs.append(op["Q"])
-        self.table = np.array(rows)
+            ops = [operating_params(build_diagram(device, float(T), board_C=float(T + o)), h_s, noise_on)
+                   for o in self.offsets]
+            tables.append([PARAMS.pack(op) for op in ops])
+            covs.append([op["Q"] for op in ops])
+        self.table = np.array(tables)  # (die, offset, param)
         self.cov = np.array(covs)
         self.spline = CubicSpline(grid, self.table, axis=0) if len(grid) > 1 else None
         self.cov_spline = CubicSpline(grid, self.cov, axis=0) if len(grid) > 1 else None
+        self.off_weights = CubicSpline(self.offsets, np.eye(len(self.offsets)), axis=0) \
+            if len(self.offsets) > 1 else None
 
-    def __call__(self, T: np.ndarray) -> np.ndarray:
-        """Packed parameters at each temperature; the noise factor is taken from the interpolated covariance
-        (covariances are smooth in T, their triangular factors need not be)."""
-        T = np.atleast_1d(T)
+    def _at(self, T: np.ndarray) -> tuple:
+        """Table and covariance at die temperatures ``T``, at every offset node."""
         if self.spline is None:
-            return np.repeat(self.table, len(T), axis=0)
-        Tu, back = np.unique(T, return_inverse=True)  # holds: one evaluation for all their blocks
-        P = self.spline(Tu)
-        P[:, PARAMS.slices["L"]] = noise_factor(self.cov_spline(Tu)).reshape(len(Tu), -1)
-        return P[back.ravel()]
+            return np.repeat(self.table, len(T), axis=0), np.repeat(self.cov, len(T), axis=0)
+        return self.spline(T), self.cov_spline(T)
+
+    def __call__(self, T: np.ndarray, offset: np.ndarray | float = 0.0) -> np.ndarray:
+        """Packed parameters at each die temperature ``T`` and board-minus-die ``offset``; the noise factor is
+        taken from the interpolated covariance (covariances are smooth in T, their triangular factors need not be)."""
+        T = np.atleast_1d(T)
+        L = PARAMS.slices["L"]
+        if self.off_weights is None and self.spline is None:
+            return np.repeat(self.table[:, 0], len(T), axis=0)
+        if self.off_weights is None:  # the board follows the die at a fixed offset
+            P, cov = (x[:, 0] for x in self._at(T))
+            P[:, L] = noise_factor(cov).reshape(len(T), -1)
+            return P
+        W = self.off_weights(np.broadcast_to(np.asarray(offset, dtype=float), T.shape))
+        P = np.empty((len(T), self.table.shape[-1]))
+        for r0 in range(0, len(T), 4096):  # in chunks of rows: the (rows, offsets, params) values stay small
+            r = slice(r0, r0 + 4096)
+            tab, cov = self._at(T[r])
+            P[r] = np.einsum("ko,kop->kp", W[r], tab)
+            P[r, L] = noise_factor(np.einsum("ko,koij->kij", W[r], cov)).reshape(len(tab), -1)
+        return P
 
 
 def parameter_blocks(scn: Scenario, fx: EffectSet, dt_out: float, n_out: int, t_fine: np.ndarray,
@@ -170,17 +201,20 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     n_out = int(np.ceil(scn.duration_s / dt_out - 1e-9))
     t_out = (np.arange(n_out) + 1) * dt_out
     fx = EffectSet(scn.effects)
-    # die temperature (thermal lag) on a fine grid, then at the blocks
+    # die temperature (thermal lag) and board temperature (the case) on a fine grid, then at the blocks
     t_fine = np.linspace(0.0, t_out[-1], max(2, min(len(t_out), 200000)))
-    die_fine = fx.die_temperature(t_fine, np.asarray(scn.temperature(t_fine), dtype=float))
+    case_fine = np.asarray(scn.temperature(t_fine), dtype=float)
+    die_fine = fx.die_temperature(t_fine, case_fine)
     blocks, temp_blk = parameter_blocks(scn, fx, dt_out, n_out, t_fine, die_fine)
+    off_blk = _block_means(blocks, dt_out, t_fine, fx.board_temperature(t_fine, case_fine) - die_fine) \
+        if fx.get("thermal_lag") else np.zeros(len(blocks))
     case_out = np.asarray(scn.temperature.left_limit(t_out), dtype=float)  # over each sample
     temp_all = np.interp(t_out, t_fine, die_fine) if fx.get("thermal_lag") else case_out
     sig_fine = fx.signals(t_fine, die_fine)
     nz = scn.noise
     noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
     tab = _ParamTable(dev, h, noise_on, float(min(temp_blk.min(), temp_all.min())),
-                      float(max(temp_blk.max(), temp_all.max())))
+                      float(max(temp_blk.max(), temp_all.max())), float(off_blk.min()), float(off_blk.max()))
     rng = np.random.default_rng(scn.seed)
     n_steps = n_out * Mo
     phase = (noisegen.flicker(n_steps, 1.0 / h, dev.values["noise"]["flicker_phase_rad2"], rng)
@@ -190,7 +224,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
                      * sf_nom if nz["flicker"] else np.zeros(n_out))
     rrw_V = (noisegen.random_walk(n_out, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"],
                                   rng) * sf_nom if nz["rate_random_walk"] else np.zeros(n_out))
-    x = _initial(scn, float(temp_blk[0]))
+    x = _initial(scn, float(temp_blk[0]), float(off_blk[0]))
     roll = load_rollout(ENVELOPE_MODEL, log)
     any_noise = nz["brownian"] or nz["electronic"]
     X = np.empty((n_out, STATE.size))
@@ -202,7 +236,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
         o1 = blocks[k1 - 1][0] + nob
         s0, s1 = o0 * Mo, o1 * Mo
         W = _inputs(scn, rng, any_noise, (s0 + np.arange(s1 - s0 + 1)) * h, t_fine, sig_fine, phase[s0:s1])
-        Xc = roll(x, tab(temp_blk[k0:k1]), W, Mo, nob)
+        Xc = roll(x, tab(temp_blk[k0:k1], off_blk[k0:k1]), W, Mo, nob)
         X[o0:o1] = Xc
         x = roll.continue_from(Xc[-1])
         bar.update(o1 - o0)
@@ -222,10 +256,17 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     info = dict(engine="envelope", step_s=h, steps_per_output=Mo, output_interval_s=dt_out,
                 nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,
                 wall_time_s=wall, simulated_time_s=float(t_out[-1]), temperature_grid_points=len(tab.grid),
-                parameter_blocks=len(blocks), steps_per_cycle=None)
+                parameter_blocks=len(blocks), board_offset_grid_points=len(tab.offsets), steps_per_cycle=None)
     meta = {"device": dev.name, "source": "simulation", "engine": "envelope", "scenario": scn.name,
             "seed": str(scn.seed), "nominal_scale_factor_V_per_dps": f"{sf_nom:.9g}"}
     return SimResult(channels, internal, info, meta)
+
+
+def _block_means(blocks: list, dt_out: float, t_fine: np.ndarray, y_fine: np.ndarray) -> np.ndarray:
+    """Mean of ``y_fine`` (on ``t_fine``, linear between) over each parameter block."""
+    cum = np.concatenate(([0.0], np.cumsum(np.diff(t_fine) * 0.5 * (y_fine[1:] + y_fine[:-1]))))
+    te = np.array([b[0] for b in blocks] + [blocks[-1][0] + blocks[-1][1]]) * dt_out
+    return np.diff(np.interp(te, t_fine, cum)) / np.diff(te)
 
 
 def _calls(blocks: list, max_outputs: int):
@@ -265,9 +306,10 @@ def _inputs(scn: Scenario, rng, any_noise: bool, t_edges: np.ndarray, t_fine: np
     return W
 
 
-def _initial(scn: Scenario, T0: float) -> np.ndarray:
-    """Initial envelope state: at rest with the initial displacement, or on the averaged steady state at ``T0``."""
-    dg = build_diagram(scn.device, T0)
+def _initial(scn: Scenario, T0: float, offset0: float = 0.0) -> np.ndarray:
+    """Initial envelope state: at rest with the initial displacement, or on the averaged steady state at the die
+    temperature ``T0`` with the board ``offset0`` above it."""
+    dg = build_diagram(scn.device, T0, board_C=T0 + offset0)
     x = dict(x=np.zeros(N), u=0.0, acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0, agc_V=0.0,
              freq_Hz=dg.resonator.f_drive_Hz, refine=0.0)
     if scn.settings["initial"]["state"] == "steady":

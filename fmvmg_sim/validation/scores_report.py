@@ -1,12 +1,12 @@
 """The benchmark's scores as a page a person reads: targets against measured values, tiers, misses by cause.
 
-Reads only the scores object of :func:`~.benchmark.score` (plus the run settings :func:`~.benchmark.run_benchmark`
+Reads only the scores object of :func:`~.scoring.score` (plus the run settings :func:`~.benchmark.run_benchmark`
 adds); knows nothing of how the cases were made or diagnosed.
 """
 
 from __future__ import annotations
 
-from .benchmark import IMPOSSIBLE_CAUSES, MISS_CAUSES
+from .scoring import IMPOSSIBLE_CAUSES, MISS_CAUSES
 
 #: The issue's targets: (score key, count key, comparison, target, label).
 TARGETS = (
@@ -50,7 +50,7 @@ def format_scores(sc: dict) -> str:
     Parameters
     ----------
     sc : dict
-        From :func:`~.benchmark.score` (``seed``, ``null_runs`` and ``mix`` are used when present).
+        From :func:`~.scoring.score` (``seed``, ``null_runs`` and ``mix`` are used when present).
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""The honest compensation evaluation (issue 5): Allan readings, truth figures, bandwidth, CLI."""
+"""The honest compensation evaluation: Allan readings, truth figures, bandwidth, CLI."""
 
 import json
 
@@ -7,7 +7,7 @@ import pytest
 from scipy.signal import butter, sosfilt
 
 from fmvmg_sim.cli.main import main
-from fmvmg_sim.compensation.evaluate import (allan_figures, evaluate, filter_time_constant, gain_phase,
+from fmvmg_sim.validation.compensation_eval import (allan_figures, evaluate, filter_time_constant, gain_phase,
                                              markdown_table, sine_windows, truth_figures)
 from fmvmg_sim.record import Record
 

@@ -26,11 +26,20 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..effects import MODELS, validate_effects
+from ..averaged import scale_factor_V_per_dps
+from ..diagnosis.calibrate import calibrate
+from ..diagnosis.data import prepare
+from ..diagnosis.fitting import PATH_EFFECTS, Fitter
+from ..diagnosis.forward import CHANNELS, IRATE
+from ..diagnosis.likelihood import innovations, slow_state_fit
+from ..diagnosis.model import EffectModel
+from ..diagnosis.parameters import NOMINAL_KNOBS, apply_nominal
+from ..diagram import build_diagram
+from ..effects import MODELS, EffectSet, validate_effects
+from ..envelope.engine import run_envelope
 from ..profiles import PiecewiseProfile
-from ..record import atomic_write_text, write_record
-from .forward import CHANNELS
-from .parameters import NOMINAL_KNOBS, apply_nominal
+from ..record import atomic_write_text, read_record, write_record
+from ..scenario import load_scenario
 
 #: Case mix.
 P_NULL, P_SINGLE = 0.20, 0.55
@@ -281,9 +290,6 @@ def make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: floa
 def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: float, output_rate_Hz: float,
                mix: CaseMix | None) -> dict:
     """:func:`make_case`'s work (its Fitters share their response tables)."""
-    from ..effects import EffectSet
-    from ..envelope.engine import run_envelope
-    from ..scenario import load_scenario
     mix = mix or CaseMix()
     rng = np.random.default_rng([seed, k])
     u = rng.random()
@@ -445,13 +451,6 @@ def add_out_of_library(path: Path, ool: dict, target: float, device_nominal, noi
     dict
         ``ool`` with ``amplitude_dps`` and ``snr``.
     """
-    from ..averaged import scale_factor_V_per_dps
-    from ..diagram import build_diagram
-    from ..record import read_record
-    from .data import prepare
-    from .fitting import Fitter
-    from .forward import IRATE
-    from .likelihood import innovations
     rec = read_record(path, warn_unknown=False)
     cols = {c: np.array(v, dtype=float) for c, v in rec.columns.items()}
     sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
@@ -549,11 +548,6 @@ def noise_model(record, device_nominal, theta: dict) -> list:
         One ``(rho, K, s)`` per channel of :data:`fmvmg_sim.diagnosis.forward.CHANNELS` (None if absent),
         ``s`` floored at 1 (the block sigma).
     """
-    from ..averaged import scale_factor_V_per_dps
-    from ..diagram import build_diagram
-    from .data import prepare
-    from .fitting import Fitter
-    from .likelihood import slow_state_fit
     sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
     fit = Fitter(prepare(record, sf), device_nominal, tables=_CASE_TABLES.get())
     Z = fit.residual(fit.table(theta).evaluate(fit.path(None)["die_b"], fit.rate_b))
@@ -575,12 +569,6 @@ def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict, train
     quasi-static truth of the device ``theta`` with the deterministic effects ``det`` (absent channels stay
     absent), and the nominal knobs calibrated to it on every block (``training``: on the diagnoser's training
     window, the last forward-chained fold's training blocks)."""
-    from ..averaged import scale_factor_V_per_dps
-    from ..diagram import build_diagram
-    from ..record import read_record
-    from .calibrate import calibrate
-    from .data import prepare
-    from .fitting import PATH_EFFECTS, Fitter
     rec = read_record(record_path, warn_unknown=False)
     sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
     fit = Fitter(prepare(rec, sf), device_nominal, tables=_CASE_TABLES.get())
@@ -595,7 +583,6 @@ def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict, train
 def _whitened_norm(fit, pred: np.ndarray, noise: list, rows: np.ndarray | None = None) -> float:
     """``sqrt(chi^2)`` of the truth's residual against ``pred``, each channel whitened by its noise model
     (the whole record filtered, the blocks ``rows`` summed; default all)."""
-    from .likelihood import innovations
     R = fit.residual(pred)
     rows = np.ones(R.shape[0], bool) if rows is None else rows
     chi2 = sum(float(np.nansum((innovations(R[:, c], p[0], p[1])[rows] / p[2]) ** 2))
@@ -688,7 +675,6 @@ def _snr(record_path, device_nominal, theta: dict, effects: dict, noise: list | 
 
 def _snr_beyond(fit, cal, names: list, noise: list) -> float:
     """SNR of ``fit``'s truth left after the calibrated knobs and the effects ``names`` (fitted on every block)."""
-    from .model import EffectModel
     if not names:
         return _whitened_norm(fit, cal.lin.predict(cal.solution.x), noise)
     mf = EffectModel(fit, cal, sorted(names)).fit(np.ones(fit.prep.n_blocks, bool))

@@ -1,9 +1,9 @@
-"""Paired comparison of two benchmark runs on the same cases (fmvmg_sim.diagnosis.paired)."""
+"""Paired comparison of two benchmark runs on the same cases (fmvmg_sim.validation.paired)."""
 
 import numpy as np
 from scipy.stats import binom
 
-from fmvmg_sim.diagnosis.paired import format_paired, paired_changes
+from fmvmg_sim.validation.paired import format_paired, paired_changes
 
 
 def _rows(outcomes):

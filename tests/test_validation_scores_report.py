@@ -2,8 +2,8 @@
 
 import pytest
 
-from fmvmg_sim.diagnosis.benchmark import score
-from fmvmg_sim.diagnosis.benchmark_report import format_scores
+from fmvmg_sim.validation.scoring import score
+from fmvmg_sim.validation.scores_report import format_scores
 
 
 def _res(verdict, accepted=()):

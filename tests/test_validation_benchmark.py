@@ -111,7 +111,7 @@ def test_a_narrow_mix_reaches_the_cases_and_the_scores(tmp_path, capsys):
 def test_out_of_library_cases_are_scored_apart_from_nulls():
     # an out-of-library case has no library effect but is no null case: the right verdict is "unexplained",
     # a claimed library effect is a mis-attribution, and neither touches the false-alarm rate
-    from fmvmg_sim.diagnosis.benchmark import score
+    from fmvmg_sim.validation.scoring import score
 
     def res(verdict, accepted=()):
         return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted), "ambiguous_with": {},
@@ -136,7 +136,7 @@ def test_partial_verdicts_are_scored_as_flagged_remainders():
     # "unexplained" beside accepted effects (they explain part of the gap, not where it lies): on an
     # out-of-library case a flagged remainder, not a confident mis-attribution; on a right attribution it still
     # counts as right for top-1, and is counted in partial_when_right
-    from fmvmg_sim.diagnosis.benchmark import score
+    from fmvmg_sim.validation.scoring import score
 
     def res(verdict, accepted=()):
         return {"verdict": verdict, "accepted": list(accepted), "ranked": list(accepted), "ambiguous_with": {},
@@ -159,7 +159,7 @@ def test_partial_verdicts_are_scored_as_flagged_remainders():
 def test_misses_are_counted_by_cause():
     # each true effect missing from a missed case gets one cause: flicker beside a converter, no held-out fold
     # able to test it, a look-alike, a much stronger partner found, or an acceptance criterion; a right case none
-    from fmvmg_sim.diagnosis.benchmark import MISS_CAUSES, score
+    from fmvmg_sim.validation.scoring import MISS_CAUSES, score
 
     def res(verdict, accepted=(), amb=None, rows=None):
         rw = {a: {"shrink": 0.9, "params": {}, "accepted": True, "folds_testable": 3, "why_not": []} for a in accepted}
@@ -206,8 +206,8 @@ def test_inseparable_pair_members_are_scored_apart():
     # a pair member whose signature the other member explains (its SNR beyond the partner below the limit)
     # is missed as "inseparable", before any look-alike or criterion reading; the separable pairs get their
     # own exact-set rate beside the target's, and labels without the field count by their tier
-    from fmvmg_sim.diagnosis.benchmark import SEPARABLE_SNR_MIN, score
-    from fmvmg_sim.diagnosis.cases import SNR_TIERS
+    from fmvmg_sim.validation.scoring import SEPARABLE_SNR_MIN, score
+    from fmvmg_sim.validation.cases import SNR_TIERS
     assert SEPARABLE_SNR_MIN == next(lo for lo, _, n in SNR_TIERS if n == "above")
 
     def res(accepted, amb=None):
@@ -242,7 +242,7 @@ def test_inseparable_pair_members_are_scored_apart():
 
 def test_rates_carry_their_wilson_interval():
     # the closed form (Wilson 1927) and a textbook value: 9 of 10 at 95 % is 0.596-0.982
-    from fmvmg_sim.diagnosis.benchmark import score, wilson_interval
+    from fmvmg_sim.validation.scoring import score, wilson_interval
     z = 1.959963984540054
 
     def closed(k, n):
@@ -284,7 +284,7 @@ def test_single_effects_are_split_by_what_the_training_window_carries():
     # a single effect above the whole-record limit whose training window carries it below the limit is missed
     # for that reason (after the held-out fold test, before the look-alike and criteria causes); top-1 and
     # top-2 are split by the label's training tier beside the target's, old labels without it not counted
-    from fmvmg_sim.diagnosis.benchmark import score
+    from fmvmg_sim.validation.scoring import score
 
     def res(verdict, accepted=(), rows=None):
         rw = {a: {"shrink": 0.9, "params": {}, "accepted": True, "folds_testable": 3, "why_not": []} for a in accepted}
@@ -321,8 +321,8 @@ def test_the_ceiling_puts_right_every_miss_the_record_allows():
     # (IMPOSSIBLE_CAUSES); a criteria miss of a single effect whose training window carries it below the limit
     # reads as train_below_limit (rows stored before labels carried snr_train); failed diagnoses and pairs
     # inexact through an extra effect count as reachable; below-limit singles are outside the denominator
-    from fmvmg_sim.diagnosis.benchmark import IMPOSSIBLE_CAUSES, MISS_CAUSES, ceilings, score
-    from fmvmg_sim.diagnosis.benchmark_report import format_scores
+    from fmvmg_sim.validation.scoring import IMPOSSIBLE_CAUSES, MISS_CAUSES, ceilings, score
+    from fmvmg_sim.validation.scores_report import format_scores
     assert set(IMPOSSIBLE_CAUSES) < set(MISS_CAUSES)
 
     def res(accepted=(), rows=None, verdict=None):

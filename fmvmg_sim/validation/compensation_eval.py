@@ -1,4 +1,4 @@
-"""Honest end-to-end evaluation of drift compensators on simulated runs (issues 5 and 6).
+"""Honest end-to-end evaluation of drift compensators on simulated runs.
 
 For every evaluation seed the simulator makes two oven runs with *different* seeds *and*
 temperature profiles -- one shaped like paper 000's oven test (cold soak, then hot soak,
@@ -45,13 +45,17 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.allan import allan_deviation, oadev_numpy
+from ..compensation.base import get_method
+from ..compensation.poly import rate_error
 from ..errors import InputError
 from ..paths import scenarios_dir
 from ..record import Record
+from ..runner import run_scenario
+from ..scenario import load_scenario
 
 #: Name of the uncompensated output in method lists.
 RAW = "raw"
-#: Methods of the full comparison (issue 6), in table order.
+#: Methods of the full comparison, in table order.
 ALL_METHODS = (RAW, "poly-baseline", "emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "physics")
 #: Frequencies of the bandwidth check, Hz.
 BANDWIDTH_FREQS_HZ = (1.0, 10.0, 50.0)
@@ -180,8 +184,6 @@ class RunCache:
         """The record of profile ``name`` simulated with ``seed`` (cached)."""
         key = (name, seed)
         if key not in self._runs:
-            from ..runner import run_scenario
-            from ..scenario import load_scenario
             p = self.profiles[name]
             t0 = time.perf_counter()
             scen = load_scenario(SCENARIO_DIR / p.scenario, overrides=p.overrides(self.effects), seed=seed)
@@ -412,7 +414,6 @@ def gain_phase(record: Record, out: np.ndarray, freqs=BANDWIDTH_FREQS_HZ) -> dic
 # The evaluation
 # --------------------------------------------------------------------------------------------
 def _make(method: str, seed: int, params: dict | None):
-    from .base import get_method
     cls = get_method(method)
     names = cls().get_params()
     kw = dict(params or {})
@@ -438,7 +439,6 @@ class DecompositionCache:
 
     def get(self, comp, record: Record, which: str):
         """(groups, diagnostics copy) of ``record``'s training error (``which="error"``) or rate."""
-        from .poly import rate_error
         key = (id(record), which, getattr(comp, "noise_se_min", None), getattr(comp, "drift_se_max", None))
         if key not in self._d:
             y = rate_error(record) if which == "error" else np.asarray(record["rate_dps"], float)
@@ -533,7 +533,7 @@ def evaluate(methods=ALL_METHODS, seeds: int = 5, quick: bool = False, effects: 
     methods : sequence of str
         Method names (``"raw"`` for the uncompensated output).
     seeds : int
-        Evaluation seeds (>= 1; issue 5 asks for >= 5).
+        Evaluation seeds (>= 1; 5 or more for figures worth quoting).
     quick : bool
         Short, low-rate runs (tests, smoke checks).
     effects : dict, optional
@@ -565,7 +565,6 @@ def evaluate(methods=ALL_METHODS, seeds: int = 5, quick: bool = False, effects: 
         Unknown method or fewer than one seed.
     """
     from tqdm import tqdm
-    from .base import get_method
 
     methods = list(dict.fromkeys(methods))
     if not methods:
