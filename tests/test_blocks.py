@@ -11,7 +11,7 @@ from blocks import (AllPassPhaseShifter, CapacitivePickoff, DifferentialAmplifie
                     FullWaveRectifier, LowPass1, LowPass2, Multiplier, PIController, SummingJunction,
                     TwoModeResonator)
 from blocks.base import LinearBlock
-from fmvmg_sim.carrier.discretize import expm_derivative, zoh
+from fmvmg_sim.numerics.discretize import expm_derivative, zoh
 
 LINEAR_BLOCKS = [
     TwoModeResonator(q_drive=50.0, q_sense=40.0, k_quad_N_per_m=300.0, rate_rad_s=100.0),
