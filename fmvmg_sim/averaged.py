@@ -405,7 +405,7 @@ def bias_temperature_coefficients_dph_per_K(device, temperature_C: float | None 
         ``total``, ``die`` and ``board`` in deg/h per K.
     """
     T = device.reference_temperature_C if temperature_C is None else float(temperature_C)
-    sf = scale_factor_V_per_dps(build_diagram(device, device.reference_temperature_C))
+    sf = device.nominal_scale_factor_V_per_dps
 
     def bias_dph(die_C, board_C):
         return steady_state(build_diagram(device, die_C, board_C=board_C)).rate_V / sf * 3600.0
