@@ -133,6 +133,13 @@ def test_rectifier_exact_mean_over_a_step(phase):
     assert r.carrier_mean(v[0], v[-1], r.carrier_constants(w, h)) == pytest.approx(exact, rel=1e-8)
 
 
+def test_rectifier_second_harmonic_is_the_fourier_coefficient_of_abs_cos():
+    r = FullWaveRectifier(gain=2.5)
+    th = np.linspace(0, 2 * np.pi, 100001)
+    a2 = np.trapezoid(2.5 * np.abs(np.cos(th)) * np.cos(2 * th), th) / np.pi
+    assert r.second_harmonic_gain() == pytest.approx(a2, rel=1e-8)
+
+
 def test_rectifier_describing_gain_is_mean_of_abs_sine():
     r = FullWaveRectifier(gain=1.0)
     th = np.linspace(0, 2 * np.pi, 100001)
