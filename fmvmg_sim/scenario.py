@@ -150,6 +150,7 @@ class Scenario:
         Returns
         -------
         Scenario
+            A new scenario; its device and profiles are shared with this one where unchanged.
 
         Raises
         ------
