@@ -161,7 +161,7 @@ def rollout_case(spc: int):
     """The compiled roll-out on its own: config A at 25 C, one block of samples."""
     scn = scenario(0.01, spc)
     dev = scn.device
-    ref = build_diagram(dev, dev.reference_temperature_C)
+    ref = dev.reference_diagram
     h = 1.0 / (spc * ref.resonator.f_drive_Hz)
     plan = make_plan(build_diagram(dev, 25.0), h, None, ref.core_state_scale())
     M = int(round(1.0 / (1000.0 * h)))

@@ -44,6 +44,18 @@ class FullWaveRectifier(Block):
         """
         return 2.0 * self.gain / np.pi
 
+    def second_harmonic_gain(self) -> float:
+        """Amplitude of the output's second harmonic per unit input amplitude of a sinusoid: ``4 G / (3 pi)``.
+
+        The ripple a full-wave rectifier leaves at twice the input frequency (|cos| has the
+        Fourier series ``2/pi + (4/(3 pi)) cos 2 theta - ...``).
+
+        Returns
+        -------
+        float
+        """
+        return self.gain * 4.0 / (3.0 * np.pi)
+
     @staticmethod
     def carrier_constants(omega_rad_s: float, h_s: float) -> tuple[float, float, float, float]:
         """Constants of :meth:`carrier_mean` for a step ``h_s`` at ``omega_rad_s`` (needs ``omega h < pi``).

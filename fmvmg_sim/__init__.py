@@ -16,6 +16,7 @@ Sub-packages
 device, scenario, profiles : what is simulated (data in ``scenarios/``)
 diagram                    : the wiring of paper 000's Figure 3 from ``blocks``
 carrier, envelope          : the two engines that run the diagram
+numerics                   : what both engines use: exact discretisation, flat-vector layouts
 analysis, compensation, tuning, diagnosis : what users do with the records
 cli                        : the ``fmvmg`` command
 """

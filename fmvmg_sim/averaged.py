@@ -182,7 +182,7 @@ def ripple_feedback(dg: Diagram, omega: float, V_ps: complex) -> complex:
     -------
     complex
     """
-    R2 = dg.rectifier.gain * 4.0 / (3.0 * np.pi) * abs(V_ps) * np.exp(2j * np.angle(V_ps))
+    R2 = dg.rectifier.second_harmonic_gain() * abs(V_ps) * np.exp(2j * np.angle(V_ps))
     H2 = dg.amplitude_lpf.frequency_response(2 * omega)[0, 0]
     pi2 = dg.pi.kp + dg.pi.ki_per_s / (2j * omega)
     return complex(-pi2 * H2 * R2)
@@ -353,8 +353,10 @@ def zero_rate_bias_dps(dg: Diagram, nominal_sf_V_per_dps: float | None = None) -
 def closed_form_scale_factor_V_per_dps(dg: Diagram) -> float:
     """The physics brief's closed form (section 2) of the scale factor.
 
-    ``SF = lambda (K_sy / K_dx) (pi/2) Vref G_dem / (2 dw) cos(phi)`` per rad/s, with
-    ``K_dx = |H_dx H_ps|`` (V/m to the rectifier), ``K_sy`` the sense pickoff and
+    ``SF = lambda (K_sy / K_dx) (pi/2) Vref G_dem / (2 dw) cos(phi)`` per rad/s, written as
+    ``lambda K_sy A_d G_dem / (2 dw) cos(phi)`` with ``A_d = (Vref - V_off) / (G_rect K_dx)`` the drive
+    amplitude the AGC holds (``K_dx = |H_dx H_ps|`` the V/m to the rectifier, ``G_rect = 2 G_r / pi`` its
+    describing gain, ``V_off`` its offset), ``K_sy`` the sense pickoff and
     amplifier gain (V/m), ``G_dem = G_out K_m Vdac``, ``dw`` the mode split in rad/s and
     ``phi`` the mechanical sense phase (the electronic mismatch is trimmed out). It neglects the sense damping and
     ``omega_s^2 - omega^2 ~ 2 omega dw``, so it agrees with :func:`scale_factor_V_per_dps`
@@ -371,14 +373,14 @@ def closed_form_scale_factor_V_per_dps(dg: Diagram) -> float:
     """
     ss = steady_state(dg)
     w = ss.omega_rad_s
-    k_dx = abs(dg.drive_chain_response(w) * dg.phase_shifter_response(w)) * dg.rectifier.gain
+    amplitude_m = _amplitude(dg, w, dg.vref_V)
     k_sy = abs(dg.sense_pickoff.gain_V_per_m * dg.sense_amps_response(w))
     lam = dg.resonator.angular_gain
     dw = 2 * np.pi * dg.resonator.f_sense_Hz - w
     g_dem = dg.output_lpf.gain * dg.demodulator.k_per_V * abs(ss.R_I)
     ws = 2 * np.pi * dg.resonator.f_sense_Hz
     phi = np.arctan2(ws * w / dg.resonator.q_sense, ws ** 2 - w ** 2)  # mechanical sense phase
-    sf_rad = lam * (k_sy / k_dx) * (np.pi / 2) * (dg.vref_V - dg.rectifier.offset_V) * g_dem / (2 * dw) * np.cos(phi)
+    sf_rad = lam * k_sy * amplitude_m * g_dem / (2 * dw) * np.cos(phi)
     return float(sf_rad * np.pi / 180.0)
 
 
@@ -405,7 +407,7 @@ def bias_temperature_coefficients_dph_per_K(device, temperature_C: float | None 
         ``total``, ``die`` and ``board`` in deg/h per K.
     """
     T = device.reference_temperature_C if temperature_C is None else float(temperature_C)
-    sf = scale_factor_V_per_dps(build_diagram(device, device.reference_temperature_C))
+    sf = device.nominal_scale_factor_V_per_dps
 
     def bias_dph(die_C, board_C):
         return steady_state(build_diagram(device, die_C, board_C=board_C)).rate_V / sf * 3600.0

@@ -49,7 +49,7 @@ import numpy as np
 
 from blocks.ops import numpy_ops
 
-from .carrier.layout import Layout
+from .numerics.layout import Layout
 
 _WARNED = False
 #: -march=native is worth 25 % on the carrier step; the cache key includes the CPU so a library built for

@@ -10,12 +10,15 @@ that temperature, from which :mod:`fmvmg_sim.diagram` builds the blocks.
 from __future__ import annotations
 
 import copy
+import json
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from . import thermal_laws as law
+from .errors import InputError
 from .paths import scenarios_dir
 from .schema import Choice, Num, Text, validate_tree
 from .tomlio import load_toml
@@ -85,6 +88,22 @@ BOARD_LAWS = ("circuit.drive_amp.gain_tc_per_K", "circuit.drive_amp.gbw_tc_per_K
               "circuit.reference.vref_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K",
               "circuit.sense_pickoff.c_feedthrough_tc_per_K")
 
+#: Devices whose derived numbers (reference diagram, nominal scale factor) are kept, by content (a few kB each).
+DERIVED_CACHE_SIZE = 512
+_DERIVED: OrderedDict = OrderedDict()
+
+
+def _derived(device: "Device", name: str, compute):
+    """``compute()`` once per device content and name (least recently used dropped first)."""
+    key = (device.content_key, name)
+    if key in _DERIVED:
+        _DERIVED.move_to_end(key)
+        return _DERIVED[key]
+    value = _DERIVED[key] = compute()
+    while len(_DERIVED) > DERIVED_CACHE_SIZE:
+        _DERIVED.popitem(last=False)
+    return value
+
 
 @dataclass
 class OperatingPoint:
@@ -133,6 +152,33 @@ class Device:
     def reference_temperature_C(self) -> float:
         """Temperature at which the nominal values hold."""
         return float(self.values["reference_temperature_C"])
+
+    @property
+    def content_key(self) -> str:
+        """The values as canonical JSON: devices with equal values share it (derived numbers are cached under it)."""
+        return json.dumps(self.values, sort_keys=True, default=repr)
+
+    @property
+    def reference_diagram(self):
+        """The diagram (:class:`fmvmg_sim.diagram.Diagram`) at the reference temperature, die and board.
+
+        Built once per device content and shared by every caller: read it, do not change it.
+        """
+        # the diagram module imports this one, and its blocks python-control (2 s), which loading a device
+        # does not need: imported on first use
+        from .diagram import build_diagram
+        return _derived(self, "reference_diagram", lambda: build_diagram(self, self.reference_temperature_C))
+
+    @property
+    def nominal_scale_factor_V_per_dps(self) -> float:
+        """Rate output per deg/s of the averaged steady state at the reference temperature (V/(deg/s)).
+
+        A record's ``rate_dps`` is its ``rate_V`` divided by the nominal device's (the scenario's
+        device without effects). Computed once per device content.
+        """
+        from .averaged import scale_factor_V_per_dps  # imports this module through the diagram (above)
+        return _derived(self, "nominal_scale_factor_V_per_dps",
+                        lambda: scale_factor_V_per_dps(self.reference_diagram))
 
     def with_overrides(self, overrides: dict, where: str) -> "Device":
         """A copy with some values replaced (validated against the same schema).
@@ -228,16 +274,20 @@ class Device:
             None if board_C is None else float(board_C))
 
     def nominal_amplitude_m(self) -> float:
-        """Drive amplitude the AGC holds at the reference temperature, ``(pi/2) Vref / (G_r K_dx)``.
+        """Drive amplitude the AGC holds at the reference temperature, ``Vref / (G_rect K_dx)``.
+
+        ``G_rect = 2 G_r / pi`` is the rectifier's describing gain and ``K_dx`` the drive pickoff's gain
+        times the drive amplifier's (the phase shifter passes the amplitude unchanged).
 
         Returns
         -------
         float
         """
+        # blocks import python-control (2 s), which loading a device does not need: imported on first use
+        from blocks import CapacitivePickoff, FullWaveRectifier
         ci = self.values["circuit"]
-        dp = ci["drive_pickoff"]
-        k_dx = dp["bias_V"] * dp["dC_dx_F_per_m"] / dp["c_feedback_F"] * abs(ci["drive_amp"]["gain"])
-        return (np.pi / 2) * ci["reference"]["vref_V"] / (ci["rectifier"]["gain"] * k_dx)
+        k_dx = CapacitivePickoff(**ci["drive_pickoff"]).gain_V_per_m * abs(ci["drive_amp"]["gain"])
+        return ci["reference"]["vref_V"] / (FullWaveRectifier(gain=ci["rectifier"]["gain"]).describing_gain() * k_dx)
 
     def _k3_from_rel(self) -> float:
         rel = self.values["mechanics"].get("duffing_k3_rel", 0.0)
@@ -286,7 +336,6 @@ def load_device(path: str | Path) -> Device:
     values = validate_tree(tree, DEVICE_SCHEMA, str(path), sourced=True)
     missing = _missing(values, DEVICE_SCHEMA)
     if missing:
-        from .errors import InputError
         raise InputError(f"missing key(s) {missing}", str(path))
     return Device(values, str(p))
 

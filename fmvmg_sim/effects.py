@@ -24,7 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .device import Device
 from .errors import InputError
+from .tomlio import suggest
 
 
 @dataclass(frozen=True)
@@ -96,7 +98,6 @@ def validate_effects(table: dict, where: str) -> dict:
     ------
     InputError
     """
-    from .tomlio import suggest
     if not isinstance(table, dict):
         raise InputError("expected a table of effects", where)
     out = {}
@@ -162,7 +163,6 @@ class EffectSet:
         -------
         fmvmg_sim.device.Device
         """
-        from .device import Device
         v = copy.deepcopy(device.values)
         th, ci, me = v["thermal"], v["circuit"], v["mechanics"]
         if (e := self.get("quadrature_drift")):
@@ -289,7 +289,7 @@ def first_order_lag(t_s: np.ndarray, u: np.ndarray, tau_s: float) -> np.ndarray:
     # FOH: y+ = a y + (1 - a) u0 + (u1 - u0) (1 - tau (1 - a)/dt)
     b = 1.0 - tau_s * (1.0 - a) / dt
     du = np.diff(u)
-    from scipy.signal import lfilter
+    from scipy.signal import lfilter  # 1 s to import, and only a thermal lag needs it
     if np.allclose(dt, dt[0]) if len(dt) else True:
         drive = (1.0 - a) * u[:-1] + du * b
         zi = np.array([a[0] * y[0]]) if len(dt) else None

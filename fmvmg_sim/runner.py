@@ -153,8 +153,7 @@ def run_scenario(scn: Scenario, progress: bool | None = None) -> tuple[SimResult
         res = run_envelope(scn, progress=progress)
     t = res.time_s
     vref = vref_profile_V(scn, t, res["temperature_C"])
-    me = scn.device.values["mechanics"]
-    ring_s = 2 * me["q_sense"] / (2 * np.pi * me["f_sense_Hz"])
+    ring_s = scn.device.reference_diagram.resonator.ringdown_time_constant_s("sense")
     summary = summarize(res, vref, scn.device.values["circuit"]["pi"]["u_max_V"],
                         predicted=predictions(scn, float(res["temperature_C"][-1])),
                         transient_s=3 * ring_s, by_temperature_predicted=lambda T: predictions(scn, T))

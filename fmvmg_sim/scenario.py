@@ -30,7 +30,10 @@ import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .device import Device, load_device
+from .effects import EffectSet, validate_effects
 from .errors import InputError
 from .paths import devices_dir, resolve_device, resolve_scenario, shipped_devices, shipped_scenarios
 from .profiles import PiecewiseProfile, build_profile
@@ -119,6 +122,63 @@ class Scenario:
     def noise(self) -> dict:
         """Noise switches."""
         return self.settings["noise"]
+
+    def replace(self, *, scenario: dict | None = None, initial: dict | None = None, noise: dict | None = None,
+                device: Device | None = None, device_nominal: Device | None = None,
+                temperature: PiecewiseProfile | None = None, rate: PiecewiseProfile | None = None,
+                vref_factor: PiecewiseProfile | None = None, effects: dict | None = None) -> "Scenario":
+        """A copy with some parts changed, validated as a loaded scenario is; this one is left as it is.
+
+        ``scn.replace(scenario={"duration_s": 600.0, "seed": 3}, initial={"state": "steady"})`` is
+        the scenario ``--set scenario.duration_s=600 --set scenario.seed=3 --set initial.state=steady``
+        would load.
+
+        Parameters
+        ----------
+        scenario, initial, noise : dict, optional
+            Keys of the ``[scenario]``, ``[initial]`` and ``[noise]`` tables to change (the others kept).
+        device : Device, optional
+            The device to simulate, used as given (effects already folded in).
+        device_nominal : Device, optional
+            The device without the effects (its scale factor converts rate_V to rate_dps). Without
+            ``device``, the simulated device is this one with the effects folded in.
+        temperature, rate, vref_factor : PiecewiseProfile, optional
+            Profiles against time: from t = 0, times non-decreasing, values finite.
+        effects : dict, optional
+            An ``[effects]`` table. Without ``device``, it is folded into the nominal device.
+
+        Returns
+        -------
+        Scenario
+            A new scenario; its device and profiles are shared with this one where unchanged.
+
+        Raises
+        ------
+        InputError
+            An unknown key, a value out of range, a profile out of order or an object of the wrong
+            type; the message names it.
+        """
+        name = self.name
+        settings = copy.deepcopy(self.settings)
+        for table, changes in (("scenario", scenario), ("initial", initial), ("noise", noise)):
+            if changes:
+                checked = validate_tree({table: dict(changes)}, SCENARIO_SCHEMA, name)
+                settings[table].update(checked[table])
+        for label, dev in (("device", device), ("device_nominal", device_nominal)):
+            if dev is not None and not isinstance(dev, Device):
+                raise InputError(f"expected a Device, got {type(dev).__name__}", f"{name}: {label}")
+        profiles = {}
+        for label, profile in (("temperature", temperature), ("rate", rate), ("vref_factor", vref_factor)):
+            current = getattr(self, label)
+            profiles[label] = current if profile is None else _checked_profile(profile, f"{name}: {label}")
+        nominal = self.device_nominal if device_nominal is None else device_nominal
+        fx = self.effects if effects is None else validate_effects(effects, f"{name}: effects")
+        if device is None:
+            device = self.device
+            if effects is not None or device_nominal is not None:
+                device = EffectSet(fx).apply_to_device(nominal) if fx else nominal
+        return Scenario(self.path, settings, device, profiles["temperature"], profiles["rate"],
+                        profiles["vref_factor"], fx, nominal)
 
     def fidelity(self) -> str:
         """The engine to use: 'carrier' or 'envelope' ('auto' resolved by duration).
@@ -231,7 +291,6 @@ def _build(tree: dict, path: Path, name: str, seed: int | None, fidelity: str | 
         if extra:
             raise InputError(f"unknown key(s) {sorted(extra)}; expected {start}, segments or points",
                              f"{name}: {label}")
-    from .effects import EffectSet, validate_effects
     effects = validate_effects(tree.get("effects", {}), f"{name}: effects")
     nominal = device
     device = EffectSet(effects).apply_to_device(device) if effects else device
@@ -251,3 +310,20 @@ def _deep_update(dst: dict, src: dict) -> None:
             _deep_update(dst[k], v)
         else:
             dst[k] = v
+
+
+def _checked_profile(profile, where: str) -> PiecewiseProfile:
+    """``profile`` if it is a profile a scenario can hold: from t = 0, times non-decreasing, values finite."""
+    if not isinstance(profile, PiecewiseProfile):
+        raise InputError(f"expected a PiecewiseProfile, got {type(profile).__name__}", where)
+    t, v = np.asarray(profile.times_s, dtype=float), np.asarray(profile.values, dtype=float)
+    if t.ndim != 1 or t.shape != v.shape or t.size == 0:
+        raise InputError(f"times and values must be two 1-D arrays of one length, got {t.shape} and {v.shape}", where)
+    if t[0] != 0.0:
+        raise InputError(f"the profile must start at t = 0, not {t[0]!r} s", where)
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
+        raise InputError("times and values must be finite", where)
+    if np.any(np.diff(t) < 0):
+        k = int(np.flatnonzero(np.diff(t) < 0)[0])
+        raise InputError(f"times must not decrease (breakpoint {k + 2} at {t[k + 1]!r} s after {t[k]!r} s)", where)
+    return profile

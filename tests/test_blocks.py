@@ -11,7 +11,7 @@ from blocks import (AllPassPhaseShifter, CapacitivePickoff, DifferentialAmplifie
                     FullWaveRectifier, LowPass1, LowPass2, Multiplier, PIController, SummingJunction,
                     TwoModeResonator)
 from blocks.base import LinearBlock
-from fmvmg_sim.carrier.discretize import expm_derivative, zoh
+from fmvmg_sim.numerics.discretize import expm_derivative, zoh
 
 LINEAR_BLOCKS = [
     TwoModeResonator(q_drive=50.0, q_sense=40.0, k_quad_N_per_m=300.0, rate_rad_s=100.0),
@@ -131,6 +131,13 @@ def test_rectifier_exact_mean_over_a_step(phase):
     v = 0.7 * np.sin(w * t + phase)
     exact = 1.3 * np.trapezoid(np.abs(v), t) / h + 0.01
     assert r.carrier_mean(v[0], v[-1], r.carrier_constants(w, h)) == pytest.approx(exact, rel=1e-8)
+
+
+def test_rectifier_second_harmonic_is_the_fourier_coefficient_of_abs_cos():
+    r = FullWaveRectifier(gain=2.5)
+    th = np.linspace(0, 2 * np.pi, 100001)
+    a2 = np.trapezoid(2.5 * np.abs(np.cos(th)) * np.cos(2 * th), th) / np.pi
+    assert r.second_harmonic_gain() == pytest.approx(a2, rel=1e-8)
 
 
 def test_rectifier_describing_gain_is_mean_of_abs_sine():

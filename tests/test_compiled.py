@@ -105,7 +105,7 @@ def test_generated_c_matches_casadi_operation_by_operation(tmp_path, monkeypatch
     """The C written from the expression graph gives CasADi's own numbers, NaN and infinity included."""
     import casadi as ca
 
-    from fmvmg_sim.carrier.layout import Layout
+    from fmvmg_sim.numerics.layout import Layout
     from fmvmg_sim.compiled import StepModel
 
     def step(x, p, w, ops):
@@ -134,7 +134,7 @@ def test_generated_c_matches_casadi_operation_by_operation(tmp_path, monkeypatch
 # piece; a step that ends in another piece than it started in is flagged and redone in sub-steps.
 
 from blocks.ops import numpy_ops  # noqa: E402
-from fmvmg_sim.carrier.layout import Layout  # noqa: E402
+from fmvmg_sim.numerics.layout import Layout  # noqa: E402
 from fmvmg_sim.compiled import Refinement, StepModel  # noqa: E402
 
 _TOY_SUB = 16

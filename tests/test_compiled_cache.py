@@ -16,7 +16,7 @@ REPO = Path(__file__).resolve().parents[1]
 _PROGRAM = textwrap.dedent("""
     import sys
     import numpy as np
-    from fmvmg_sim.carrier.layout import Layout
+    from fmvmg_sim.numerics.layout import Layout
     from fmvmg_sim.compiled import StepModel, load_rollout
 
     def step(x, p, w, ops):

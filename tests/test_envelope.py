@@ -5,7 +5,7 @@ import pytest
 
 from fmvmg_sim.analysis import allan_deviation
 from fmvmg_sim.averaged import steady_state
-from fmvmg_sim.carrier.discretize import foh, noise_covariance
+from fmvmg_sim.numerics.discretize import foh, noise_covariance
 from fmvmg_sim.carrier.engine import run_carrier
 from fmvmg_sim.diagram import build_diagram
 from fmvmg_sim.envelope.engine import run_envelope
@@ -104,7 +104,7 @@ def test_noise_covariance_matches_lyapunov():
 
 def test_noise_factor_reproduces_badly_scaled_covariances():
     """States in metres and volts side by side; a state the noise cannot reach gets no noise."""
-    from fmvmg_sim.carrier.discretize import noise_factor
+    from fmvmg_sim.numerics.discretize import noise_factor
     A = np.array([[-5.0, 0.0, 0.0], [2e8, -300.0, 0.0], [0.0, 1.0, -1.0]])  # x0 in m drives x1 in V
     G = np.array([[1e-9, 0.0], [0.0, 1.0], [0.0, 0.0]])
     Qc = np.diag([1.0, 1e-8])

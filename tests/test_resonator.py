@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from blocks import TwoModeResonator
-from fmvmg_sim.carrier.discretize import zoh
+from fmvmg_sim.numerics.discretize import zoh
 
 
 def _discrete(r, h):

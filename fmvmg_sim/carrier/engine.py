@@ -15,22 +15,20 @@ call per chunk vectorised across units; each unit's record is the one
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from collections import OrderedDict
-from contextlib import nullcontext
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
-from .. import noise as noisegen
-from ..averaged import scale_factor_V_per_dps
 from ..compiled import load_rollout
 from ..diagram import build_diagram
 from ..effects import EffectSet
-from ..result import SimResult
+from ..result import SimResult, engine_result
 from ..scenario import Scenario
+from ..slow_noise import draw_slow_noises
 from .plan import initial_state, make_plan
 from .step import CARRIER_MODEL, N_NOISE, PARAMS, STATE
 
@@ -60,29 +58,7 @@ def _one_blas_thread():
     scipy's OpenBLAS otherwise wakes a worker thread for the matrix exponentials, which then
     spins for a while after each call: it doubles the CPU a run takes and gains nothing.
     """
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
-        return nullcontext()
     return threadpool_limits(limits=1, user_api="blas")
-
-
-def _device_id(dev) -> str:
-    """A content key of a device's values (plans and scale factors are cached under it)."""
-    return json.dumps(dev.values, sort_keys=True, default=repr)
-
-
-_SCALE_FACTORS: OrderedDict = OrderedDict()
-
-
-def _nominal_scale_factor(dev) -> float:
-    """The averaged model's scale factor of ``dev`` at its reference temperature (V per deg/s), cached."""
-    key = _device_id(dev)
-    if key not in _SCALE_FACTORS:
-        _SCALE_FACTORS[key] = scale_factor_V_per_dps(build_diagram(dev, dev.reference_temperature_C))
-        while len(_SCALE_FACTORS) > PLAN_CACHE_SIZE:
-            _SCALE_FACTORS.popitem(last=False)
-    return _SCALE_FACTORS[key]
 
 
 class _Unit:
@@ -93,7 +69,7 @@ class _Unit:
         self.wall0 = time.perf_counter()
         dev = self.dev = scn.device
         st = scn.settings["scenario"]
-        ref = self.ref = build_diagram(dev, dev.reference_temperature_C)
+        ref = self.ref = dev.reference_diagram
         self.f_ref = ref.resonator.f_drive_Hz
         self.spc = int(st["steps_per_cycle"])
         h = self.h = 1.0 / (self.spc * self.f_ref)
@@ -108,18 +84,11 @@ class _Unit:
         board = fx.board_temperature(t_mid, case_mid)
         self.sig = fx.signals(t_mid, temp)
         self.rate_dps = np.asarray(scn.rate(t_mid), dtype=float) + self.sig["rate_dps"]
-        self.rate_end = np.asarray(scn.rate.left_limit(self.t_end), dtype=float)  # over the sample (a step at its end: after)
         self.vref_f = np.asarray(scn.vref_factor(t_mid), dtype=float)
         self.rng = rng = np.random.default_rng(scn.seed)
-        nz = self.nz = scn.noise
-        # slow noises at the output rate, drawn first so they do not depend on call sizes
-        self.phase_flicker = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_phase_rad2"], rng)
-                              if nz["flicker"] else np.zeros(n))
-        sf_nom = self.sf_nom = _nominal_scale_factor(scn.device_nominal)
-        self.out_flicker_V = (noisegen.flicker(n, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng)
-                              * sf_nom if nz["flicker"] else np.zeros(n))
-        self.rrw_V = (noisegen.random_walk(n, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"],
-                                           rng) * sf_nom if nz["rate_random_walk"] else np.zeros(n))
+        nz = scn.noise
+        # slow noises, the phase flicker at the output rate
+        self.slow = draw_slow_noises(scn, rng, n, dt_out, n, 1.0 / dt_out)
         self.noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
         self.any_noise = nz["brownian"] or nz["electronic"]
         self.scale = ref.core_state_scale()
@@ -127,7 +96,7 @@ class _Unit:
         self.keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K
         self.board_keys = np.round(board / T_QUANTUM_K) * T_QUANTUM_K
         self.plans: dict = {}
-        self._device_id = _device_id(dev)
+        self._device_id = dev.content_key
         self.per_call = max(1, int(round(CALL_S / dt_out)))
         p0 = self.plan_for(self.keys[0], self.board_keys[0])
         self.x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
@@ -165,17 +134,13 @@ class _Unit:
         for j, (key, board_key) in enumerate(uniq):
             rows = np.flatnonzero(inv == j)
             ks = rows + k0
-            P[rows] = self.plan_for(key, board_key).params(np.deg2rad(self.rate_dps[ks]), self.phase_flicker[ks],
+            P[rows] = self.plan_for(key, board_key).params(np.deg2rad(self.rate_dps[ks]), self.slow.phase_rad[ks],
                                                           self.vref_f[ks], self.sig["quad_rel"][ks])
         return P
 
     def result(self, roll) -> SimResult:
         """The record channels of the finished roll-out."""
-        scn, dev, nz, X, M, n = self.scn, self.dev, self.nz, self.X, self.M, self.n
-        lsb = dev.values["noise"]["quantization_lsb_V"] if nz["quantization"] else 0.0
-        # the DAQ integrates over each output interval (integrate-and-dump, no aliasing of the white noise)
-        rate_V = noisegen.quantize(_state(X, "acc_rate")[:, 0] / M + self.out_flicker_V + self.rrw_V, lsb)
-        quad_V = noisegen.quantize(_state(X, "acc_quad")[:, 0] / M, lsb)
+        X, M, n = self.X, self.M, self.n
         ncross, tlast = _state(X, "ncross")[:, 0], _state(X, "tlast")[:, 0]
         freq = np.full(n, np.nan)
         dn = np.diff(ncross)
@@ -185,27 +150,18 @@ class _Unit:
         z = _state(X, "z")
         omega = 2 * np.pi * np.where(np.isfinite(freq), freq, self.f_ref)
         x_m, v = z[:, 0] * self.scale[0], z[:, 1] * self.scale[1]
-        amp_m = np.hypot(x_m, v / omega)
+        # the DAQ integrates over each output interval (integrate-and-dump, no aliasing of the white noise)
+        outputs = dict(rate_V=_state(X, "acc_rate")[:, 0] / M, quadrature_V=_state(X, "acc_quad")[:, 0] / M,
+                       drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
+                       drive_frequency_Hz=freq)
         t_end = self.t_end
-        case_end = np.asarray(scn.temperature.left_limit(t_end), dtype=float)  # the sample's, as rate_true_dps
-        channels = dict(
-            time_s=t_end, temperature_C=case_end,
-            rate_dps=rate_V / self.sf_nom, rate_V=rate_V, rate_true_dps=self.rate_end, quadrature_V=quad_V,
-            drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
-            drive_frequency_Hz=freq,
-        )
-        t_end_die = self.fx.die_temperature(t_end, case_end)
-        internal = dict(drive_displacement_amplitude_m=amp_m, modulator_norm=_state(X, "n")[:, 0],
-                        die_temperature_C=t_end_die)
-        wall = time.perf_counter() - self.wall0
-        info = dict(engine="carrier", steps_per_cycle=self.spc, step_s=self.h, steps_per_sample=M,
-                    output_interval_s=self.dt_out, nominal_scale_factor_V_per_dps=self.sf_nom,
-                    compiled=roll.compiled, compile_s=roll.compile_s, wall_time_s=wall,
-                    simulated_time_s=float(t_end[-1]), operating_points=len(self.plans),
+        case_end = np.asarray(self.scn.temperature.left_limit(t_end), dtype=float)  # over the sample
+        internal = dict(drive_displacement_amplitude_m=np.hypot(x_m, v / omega), modulator_norm=_state(X, "n")[:, 0],
+                        die_temperature_C=self.fx.die_temperature(t_end, case_end))
+        info = dict(step_s=self.h, output_interval_s=self.dt_out, compiled=roll.compiled, compile_s=roll.compile_s,
+                    steps_per_cycle=self.spc, steps_per_sample=M, operating_points=len(self.plans),
                     phase_trim_rad=self.ref.phase_trim_rad)
-        meta = {"device": dev.name, "source": "simulation", "engine": "carrier", "scenario": scn.name,
-                "seed": str(scn.seed), "nominal_scale_factor_V_per_dps": f"{self.sf_nom:.9g}"}
-        return SimResult(channels, internal, info, meta)
+        return engine_result(self.scn, "carrier", t_end, outputs, self.slow, internal, info, self.wall0)
 
 
 def _advance(group: list, roll, bar) -> None:

@@ -10,8 +10,7 @@ from blocks import FullWaveRectifier
 
 from ..averaged import SteadyState, steady_state
 from ..diagram import CORE_INPUTS, CORE_OUTPUTS, NORMALISER_FLOOR_REL, Diagram
-from .discretize import expm_derivative, zoh
-from .layout import Layout
+from ..numerics.discretize import expm_derivative, zoh
 from .step import N_CORE, PARAMS, STATE
 
 #: Floor of the carrier normaliser, as a fraction of the v_ps amplitude at the set-point (the diagram's).
@@ -218,4 +217,4 @@ def initial_state(plan: OperatingPlan, drive_displacement_m: float = 10e-9, from
     return STATE.pack(x)
 
 
-__all__ = ["OperatingPlan", "make_plan", "initial_state", "Layout"]
+__all__ = ["OperatingPlan", "make_plan", "initial_state"]

@@ -3,7 +3,7 @@
 The linear core (resonator, pickoffs, amplifiers, phase shifter, modulator gain,
 comb drive) is advanced by its exact discretisation, scheduled in the slowly varying
 modulator gain ``g``: ``z+ = (Phi + (g - g0) Phi_g) z + Gamma w`` (first order in
-``g - g0``; :func:`fmvmg_sim.carrier.discretize.expm_derivative`). The nonlinear
+``g - g0``; :func:`fmvmg_sim.numerics.discretize.expm_derivative`). The nonlinear
 blocks use their carrier faces: the rectifier integrates ``|v|`` exactly over the
 step, the demodulators take the step mean of the product, the PI clamps with
 anti-windup, the comb drive's quadratic force is held over the next step.
@@ -17,7 +17,7 @@ from __future__ import annotations
 from blocks import FullWaveRectifier, Multiplier, PIController
 from blocks.ops import numpy_ops
 
-from .layout import Layout, dot, matvec
+from ..numerics.layout import Layout, dot, matvec
 
 N_CORE = 8
 N_NOISE = 4  # F_x Brownian, F_y Brownian, drive-front-end voltage, sense-front-end voltage

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..jsonout import strict
 from ..record import Record, atomic_write_text, read_record, write_record
 
 METHOD_NAMES = ("emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "poly-baseline", "physics")
@@ -72,20 +73,6 @@ def metrics(record: Record, rate_dps: np.ndarray | None = None) -> dict:
     return out
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
-
-
 def run(args) -> int:
     """Execute ``fmvmg compensate`` with parsed ``args``; returns the exit code."""
     from ..compensation import get_method
@@ -120,7 +107,7 @@ def run(args) -> int:
               "wall_s": round(wall, 2), "output": str(outdir / "compensated.csv"),
               "fit_diagnostics": getattr(comp, "fit_diagnostics_", getattr(comp, "diagnostics_", None)),
               "transform_diagnostics": getattr(comp, "transform_diagnostics_", None)}
-    result = _jsonable(result)
+    result = strict(result)
     text = json.dumps(result, indent=1)
     atomic_write_text(staged.path / "compensation.json", text + "\n")
     staged.commit()

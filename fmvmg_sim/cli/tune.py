@@ -152,10 +152,10 @@ def _sweep(args, device, out, temps, log) -> int:
         data = strict(res.as_dict())
         atomic_write_text(tmp / "sweep.json", json.dumps(data, indent=2) + "\n")
         if not args.no_plots:
-            from ..tuning.linear_loop import diagram_at, pole_zero_rule
+            from ..tuning.linear_loop import pole_zero_rule
             from ..tuning.plots import plot_sweep_heatmap
             pi = device.values["circuit"]["pi"]
-            marks = {"pole-zero rule": pole_zero_rule(diagram_at(device, device.reference_temperature_C)),
+            marks = {"pole-zero rule": pole_zero_rule(device.reference_diagram),
                      "current": (pi["kp"], pi["ki_per_s"])}
             if args.gains:
                 marks["given"] = tuple(args.gains)

@@ -19,13 +19,12 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from tqdm import tqdm
 
-from .. import noise as noisegen
-from ..averaged import scale_factor_V_per_dps
 from ..compiled import load_rollout
 from ..diagram import build_diagram
 from ..effects import EffectSet
-from ..result import SimResult
+from ..result import SimResult, engine_result
 from ..scenario import Scenario
+from ..slow_noise import draw_slow_noises
 from .model import IA, N_NOISE, PARAMS, N, noise_factor, operating_params, steady_vector
 from .step import ENVELOPE_MODEL, INPUTS, N_IN, STATE
 
@@ -217,13 +216,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
                       float(max(temp_blk.max(), temp_all.max())), float(off_blk.min()), float(off_blk.max()))
     rng = np.random.default_rng(scn.seed)
     n_steps = n_out * Mo
-    phase = (noisegen.flicker(n_steps, 1.0 / h, dev.values["noise"]["flicker_phase_rad2"], rng)
-             if nz["flicker"] else np.zeros(n_steps))
-    sf_nom = scale_factor_V_per_dps(build_diagram(scn.device_nominal, dev.reference_temperature_C))
-    out_flicker_V = (noisegen.flicker(n_out, 1.0 / dt_out, dev.values["noise"]["flicker_output_dps2"], rng)
-                     * sf_nom if nz["flicker"] else np.zeros(n_out))
-    rrw_V = (noisegen.random_walk(n_out, 1.0 / dt_out, dev.values["noise"]["rate_random_walk_dps_per_sqrt_s"],
-                                  rng) * sf_nom if nz["rate_random_walk"] else np.zeros(n_out))
+    slow = draw_slow_noises(scn, rng, n_out, dt_out, n_steps, 1.0 / h)  # the phase flicker at the step rate
     x = _initial(scn, float(temp_blk[0]), float(off_blk[0]))
     roll = load_rollout(ENVELOPE_MODEL, log)
     any_noise = nz["brownian"] or nz["electronic"]
@@ -235,31 +228,20 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
         o0, nob = blocks[k0]
         o1 = blocks[k1 - 1][0] + nob
         s0, s1 = o0 * Mo, o1 * Mo
-        W = _inputs(scn, rng, any_noise, (s0 + np.arange(s1 - s0 + 1)) * h, t_fine, sig_fine, phase[s0:s1])
+        W = _inputs(scn, rng, any_noise, (s0 + np.arange(s1 - s0 + 1)) * h, t_fine, sig_fine, slow.phase_rad[s0:s1])
         Xc = roll(x, tab(temp_blk[k0:k1], off_blk[k0:k1]), W, Mo, nob)
         X[o0:o1] = Xc
         x = roll.continue_from(Xc[-1])
         bar.update(o1 - o0)
     bar.close()
-    get = lambda name: X[:, STATE.slices[name]]  # noqa: E731
-    lsb = dev.values["noise"]["quantization_lsb_V"] if nz["quantization"] else 0.0
-    rate_V = noisegen.quantize(get("rate_V")[:, 0] + out_flicker_V + rrw_V, lsb)
-    quad_V = noisegen.quantize(get("quad_V")[:, 0], lsb)
-    channels = dict(
-        time_s=t_out, temperature_C=case_out,
-        rate_dps=rate_V / sf_nom, rate_V=rate_V, rate_true_dps=np.asarray(scn.rate.left_limit(t_out), dtype=float),
-        quadrature_V=quad_V, drive_amplitude_V=get("amp_V")[:, 0], agc_effort_V=get("agc_V")[:, 0],
-        drive_frequency_Hz=get("freq_Hz")[:, 0],
-    )
-    internal = dict(drive_displacement_amplitude_m=get("x")[:, 0], die_temperature_C=temp_all)
-    wall = time.perf_counter() - wall0
-    info = dict(engine="envelope", step_s=h, steps_per_output=Mo, output_interval_s=dt_out,
-                nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,
-                wall_time_s=wall, simulated_time_s=float(t_out[-1]), temperature_grid_points=len(tab.grid),
-                parameter_blocks=len(blocks), board_offset_grid_points=len(tab.offsets), steps_per_cycle=None)
-    meta = {"device": dev.name, "source": "simulation", "engine": "envelope", "scenario": scn.name,
-            "seed": str(scn.seed), "nominal_scale_factor_V_per_dps": f"{sf_nom:.9g}"}
-    return SimResult(channels, internal, info, meta)
+    get = lambda name: X[:, STATE.slices[name]][:, 0]  # noqa: E731
+    outputs = dict(rate_V=get("rate_V"), quadrature_V=get("quad_V"), drive_amplitude_V=get("amp_V"),
+                   agc_effort_V=get("agc_V"), drive_frequency_Hz=get("freq_Hz"))
+    internal = dict(drive_displacement_amplitude_m=get("x"), die_temperature_C=temp_all)
+    info = dict(step_s=h, output_interval_s=dt_out, compiled=roll.compiled, compile_s=roll.compile_s,
+                steps_per_cycle=None, steps_per_output=Mo, temperature_grid_points=len(tab.grid),
+                parameter_blocks=len(blocks), board_offset_grid_points=len(tab.offsets))
+    return engine_result(scn, "envelope", t_out, outputs, slow, internal, info, wall0)
 
 
 def _block_means(blocks: list, dt_out: float, t_fine: np.ndarray, y_fine: np.ndarray) -> np.ndarray:

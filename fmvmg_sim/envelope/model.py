@@ -47,8 +47,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..averaged import carrier_phasors, ripple_feedback, steady_state
-from ..carrier.discretize import batched_factor, foh, noise_covariance
-from ..carrier.layout import Layout
+from ..numerics.discretize import batched_factor, foh, noise_covariance
+from ..numerics.layout import Layout
 from ..diagram import Diagram
 from ..errors import InputError
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 from blocks import PIController
 from blocks.ops import numpy_ops
 
-from ..carrier.layout import Layout, dot, matvec
+from ..numerics.layout import Layout, dot, matvec
 from ..compiled import Refinement, StepModel
 from .model import IA, II, IJ, IJI, IJR, IK, IS1, IYI, IYR, N, N_NOISE, N_SUB, PARAMS, piece_field
 

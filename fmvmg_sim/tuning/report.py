@@ -135,7 +135,7 @@ def build_report(device: Device, temperatures_C=CHECK_TEMPERATURES_C, spec: Robu
         robust = tune_robust(device, spec, log=log)
         gains["robust"] = (robust.kp, robust.ki_per_s)
         tuned = "robust"
-    gains["pole_zero"] = pole_zero_rule(diagram_at(device, device.reference_temperature_C))
+    gains["pole_zero"] = pole_zero_rule(device.reference_diagram)
     gains["current"] = (float(pi["kp"]), float(pi["ki_per_s"]))
     temps = [float(t) for t in temperatures_C]
     metrics = {label: [analyze_loop(diagram_at(device, T), kp, ki) for T in temps] for label, (kp, ki) in gains.items()}

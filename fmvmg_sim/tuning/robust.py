@@ -503,7 +503,7 @@ def tune_robust(device: Device, spec: RobustSpec | None = None, start: tuple | N
     wall0 = time.perf_counter()
     plants = scenario_plants(device, spec)
     if start is None:
-        start = pole_zero_rule(diagram_at(device, device.reference_temperature_C))
+        start = pole_zero_rule(device.reference_diagram)
     kp0, ki0 = float(start[0]), float(start[1])
     x0 = (kp0, ki0)
     iters = 0

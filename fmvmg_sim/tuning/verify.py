@@ -11,7 +11,6 @@ uses for the linear prediction.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,7 +57,7 @@ def make_scenario(template: str | Path, device: Device, temperature_C: float, kp
     scn = load_scenario(template, sets, fidelity=fidelity)
     dev = device.with_overrides({"circuit": {"pi": {"kp": float(kp), "ki_per_s": float(ki_per_s)}}},
                                 f"{template} (tuned gains)")
-    return dataclasses.replace(scn, device=dev)
+    return scn.replace(device=dev)
 
 
 def _run(scn: Scenario):

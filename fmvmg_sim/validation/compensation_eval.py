@@ -48,6 +48,7 @@ from ..analysis.allan import allan_deviation, oadev_numpy
 from ..compensation.base import get_method
 from ..compensation.poly import rate_error
 from ..errors import InputError
+from ..jsonout import strict
 from ..paths import scenarios_dir
 from ..record import Record
 from ..runner import run_scenario
@@ -499,24 +500,8 @@ class Evaluation:
 
     def to_dict(self) -> dict:
         """JSON-ready dictionary (curves left out)."""
-        return _jsonable({"config": self.config, "summary": self.summary, "runs": self.runs,
+        return strict({"config": self.config, "summary": self.summary, "runs": self.runs,
                           "bandwidth": self.bandwidth})
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (float, np.floating)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
 
 
 DIRECTIONS = (("oven_000", "oven_004"), ("oven_004", "oven_000"))

@@ -1,4 +1,4 @@
-"""Named slices of flat vectors (state, per-chunk parameters) shared by the step builder and the engine."""
+"""Named slices of flat vectors: the states, parameters and inputs of a compiled step function and its engine."""
 
 from __future__ import annotations
 
