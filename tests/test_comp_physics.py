@@ -5,7 +5,8 @@ import pytest
 
 from fmvmg_sim.compensation import get_method
 from fmvmg_sim.validation.compensation_eval import RunCache, _oven_profiles, default_effects
-from fmvmg_sim.compensation.physics import PhysicsCompensator, PhysicsFallbackWarning
+from fmvmg_sim.compensation.physics import (PhysicsCompensator, PhysicsFallbackWarning, drive_frequency_tc_Hz_per_K,
+                                            find_device)
 from fmvmg_sim.compensation.poly import PolyBaseline
 from fmvmg_sim.compensation.synthetic import make_record
 from fmvmg_sim.errors import InputError
@@ -41,10 +42,13 @@ def test_beats_poly_baseline_held_out_with_thermal_lag(runs):
         assert phys < 0.5 * poly, (raw, poly, phys)
         d = phys_model.diagnostics_
         assert not d["fallback_temperature_only"] and d["die_temperature_source"] == "drive_frequency_Hz"
-        assert "Q" in d["terms"] and "Q*dT_die" in d["terms"]
+        assert d["model_family"] == "auxiliary channels" and "dT_die" in d["terms"]
         assert d["filter_time_constant_s"] == 0.0
-        # drive frequency falls with die temperature (about -0.92 Hz/K; the lag blurs the fit)
-        assert -1.2 < d["drive_frequency_tc_Hz_per_K"] < -0.5
+        # the drive-frequency slope is config A's, from its device file: f0 * tcf = 30740 Hz * -30 ppm/K
+        assert d["drive_frequency_tc_Hz_per_K"] == pytest.approx(30740.0 * -30e-6, rel=1e-3)
+        assert "fmvmg-a" in d["drive_frequency_tc_source"]
+        names = [r["name"] for r in d["selection"]["candidates"]]
+        assert any(n.startswith("temperature:") for n in names) and any("Q*dT_die" in n for n in names)
 
 
 def test_signal_path_untouched(runs):
@@ -56,13 +60,21 @@ def test_signal_path_untouched(runs):
     np.testing.assert_allclose(corr, m.drift(b))
 
 
+def test_drive_frequency_slope_from_the_device_file():
+    """Config B's drive resonance (9.6 kHz) moves 3.2 times less per kelvin than config A's."""
+    a, b = find_device("fmvmg-a"), find_device("fmvmg_b")
+    assert drive_frequency_tc_Hz_per_K(a) == pytest.approx(-0.9222, rel=1e-3)
+    assert drive_frequency_tc_Hz_per_K(b) == pytest.approx(9609.6 * -30e-6, rel=1e-3)
+    assert find_device("no-such-device") is None
+
+
 def test_agc_auto_drops_collinear_term(runs):
     m = PhysicsCompensator(use_agc="auto").fit(runs[0])
     # in the default device the damping is a function of temperature alone
     assert m.diagnostics_["agc_r2_on_die_temperature"] > 0.999
-    assert "A_agc" not in m.diagnostics_["terms"]
+    assert not any("A_agc" in r["name"] for r in m.diagnostics_["selection"]["candidates"])
     forced = PhysicsCompensator(use_agc=True).fit(runs[0])
-    assert "A_agc" in forced.diagnostics_["terms"]
+    assert any("A_agc" in r["name"] for r in forced.diagnostics_["selection"]["candidates"])
     with pytest.raises(ValueError):
         PhysicsCompensator(use_agc="maybe").fit(runs[0])
 
@@ -73,8 +85,11 @@ def test_fallback_without_auxiliary_channels():
     with pytest.warns(PhysicsFallbackWarning, match="temperature-only"):
         m = PhysicsCompensator().fit(train)
     assert m.diagnostics_["fallback_temperature_only"] is True
-    assert m.diagnostics_["terms"] == ["1", "dT_case", "dT_case^2", "dTdt_case_C_per_min"]
+    poly = PolyBaseline().fit(train)
+    assert m.diagnostics_["terms"] == poly.diagnostics_["terms"]  # the same selected temperature model
+    assert m.diagnostics_["selection"]["chosen"] == poly.diagnostics_["selection"]["chosen"]
     out = m.transform(test)
+    np.testing.assert_allclose(out, poly.transform(test))
     assert drift_rms_dph(test, out) < 0.5 * drift_rms_dph(test, test["rate_dps"])
 
 
@@ -107,8 +122,6 @@ def test_handles_gaps(runs):
 
 def test_bad_input():
     rec = make_record(duration_s=60, fs_Hz=10.0, seed=0)
-    T = rec["temperature_C"].copy()
-    T[10] = np.nan
-    cols = dict(rec.columns, temperature_C=T)
-    with pytest.raises(InputError, match="NaN"):
+    cols = {k: v for k, v in rec.columns.items() if k != "temperature_C"}
+    with pytest.raises(InputError, match="temperature_C"):
         PhysicsCompensator().fit(Record(cols))
