@@ -5,7 +5,7 @@ Usage::
     python benchmarks/compensation_eval.py run GROUP OUTDIR [--seeds 5] [--quick]
     python benchmarks/compensation_eval.py merge OUTDIR DOCSDIR
 
-``run`` evaluates one group of methods (``fast``: raw, poly-baseline, physics; ``vmd``:
+``run`` evaluates one group of methods (``fast``: raw, line, poly-baseline, physics; ``vmd``:
 vmd-wflp-cssvr; ``emd``: emd-rbf, emd-rbf-ga, emd-rbf-ga-kf; ``vmd-native``: vmd-wflp-cssvr
 without decimation, the measured effect of the 100 Hz fix) and pickles the
 :class:`~fmvmg_sim.validation.compensation_eval.Evaluation` to ``OUTDIR/GROUP.pkl``; ``merge`` combines
@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 GROUPS = {
-    "fast": ["raw", "poly-baseline", "physics"],
+    "fast": ["raw", "line", "poly-baseline", "physics"],
     "vmd": ["vmd-wflp-cssvr"],
     "emd": ["emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf"],
     "vmd-native": ["vmd-wflp-cssvr"],

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..record import Record
 from .base import get_method
-from .segments import segment_bounds
+from .segments import make_bins
 
 #: The references, in the order they are reported.
 REFERENCES = ("bias", "line")
@@ -57,18 +57,25 @@ def rms_dps(record: Record, out: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e * e))) if e.size else float("nan")
 
 
-def white_noise_floor_dps(record: Record, column: str = "rate_dps") -> float:
-    """Per-sample white-noise SD of a record, from successive differences inside each stretch between gaps.
+#: Window of the noise floor's local means, in s.
+FLOOR_WINDOW_S = 5.0
 
-    ``sqrt(mean(diff^2) / 2)`` removes anything slow (drift, a bias, a temperature law), so it
-    is the RMS a perfect drift model would leave on a static record; on a record of bursts it is
-    the white noise within the bursts.
+
+def white_noise_floor_dps(record: Record, column: str = "rate_dps", window_s: float = FLOOR_WINDOW_S) -> float:
+    """RMS of a record's deviations from its own 5 s means, inside each stretch between gaps.
+
+    What a perfect drift model (one that follows the record on a 5 s scale) would still leave:
+    the white noise, and any noise faster than the window. On a record of 5 s bursts it is the
+    noise within the bursts. Each window's mean costs one degree of freedom, which is given back
+    (``sum(dev^2) / (n - n_windows)``), so white noise of SD sigma gives sigma whatever the window.
 
     Parameters
     ----------
     record : Record
     column : str
         Channel (the true rate is subtracted first when known).
+    window_s : float
+        Width of the local means.
 
     Returns
     -------
@@ -76,13 +83,12 @@ def white_noise_floor_dps(record: Record, column: str = "rate_dps") -> float:
         deg/s for ``rate_dps``.
     """
     y = np.asarray(record[column], dtype=float) - truth_of(record)[0]
-    t = record.time_s
-    d = []
-    for a, b in segment_bounds(t):
-        seg = np.diff(y[a:b])
-        d.append(seg[np.isfinite(seg)])
-    d = np.concatenate(d) if d else np.array([])
-    return float(np.sqrt(np.mean(d * d) / 2.0)) if d.size else float("nan")
+    ok = np.isfinite(y)
+    bins = make_bins(record.time_s[ok], window_s)
+    y = y[ok]
+    dev = y - bins.mean(y)[bins.sample_bin]
+    dof = len(y) - len(bins)
+    return float(np.sqrt(np.sum(dev * dev) / dof)) if dof > 0 else float("nan")
 
 
 def compare(method: str, out: np.ndarray, train: Record, record: Record) -> dict:

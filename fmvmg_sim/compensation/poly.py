@@ -13,7 +13,6 @@ between gaps.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 from sklearn.utils.validation import check_is_fitted
 
 from ..errors import InputError
@@ -121,77 +120,6 @@ def rate_error(record: Record) -> np.ndarray:
     if record.has("rate_true_dps"):
         return y - np.nan_to_num(record["rate_true_dps"])
     return y.copy()
-
-
-def bin_means(t_s: np.ndarray, x: np.ndarray, width_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Means of ``x`` (and of time) over non-empty bins of ``width_s`` seconds.
-
-    Parameters
-    ----------
-    t_s : ndarray
-        Increasing times.
-    x : ndarray
-        Values.
-    width_s : float
-        Bin width.
-
-    Returns
-    -------
-    t_bin, x_bin : ndarray
-    """
-    idx = np.floor((t_s - t_s[0]) / width_s).astype(np.int64)
-    _, start, counts = np.unique(idx, return_index=True, return_counts=True)
-    return np.add.reduceat(t_s, start) / counts, np.add.reduceat(x, start) / counts
-
-
-def thermal_features(t_s: np.ndarray, T_C: np.ndarray, T_ref_C: float, smooth_s: float = 60.0,
-                     presmoothed: bool = False) -> np.ndarray:
-    """Regressors [dT, dT^2, dT/dt in degC/min] on the time base ``t_s``.
-
-    Parameters
-    ----------
-    t_s : ndarray
-        Times (gaps allowed).
-    T_C : ndarray
-        Temperature readings, or a trend when ``presmoothed``.
-    T_ref_C : float
-        Reference temperature of dT.
-    smooth_s : float
-        Moving-average span applied to 1 s bin means before differentiating.
-    presmoothed : bool
-        ``T_C`` is already a smooth trend (skip the moving average).
-
-    Returns
-    -------
-    ndarray, shape (len(t_s), 3)
-    """
-    tb, Tb = bin_means(t_s, T_C, 1.0)
-    if not presmoothed and len(Tb) > 2:
-        Tb = uniform_filter1d(Tb, max(1, min(int(smooth_s), len(Tb))), mode="nearest")
-    dTdt = np.gradient(Tb, tb) * 60.0 if len(Tb) > 1 else np.zeros_like(Tb)
-    if not presmoothed and len(Tb) > 2:
-        dTdt = uniform_filter1d(dTdt, max(1, min(int(smooth_s), len(Tb))), mode="nearest")
-    dT = np.interp(t_s, tb, Tb) - T_ref_C
-    return np.column_stack([dT, dT * dT, np.interp(t_s, tb, dTdt)])
-
-
-def fit_ols(X: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Least-squares coefficients of ``y`` on ``[1, X]``.
-
-    Parameters
-    ----------
-    X : ndarray, shape (n, p)
-        Regressors.
-    y : ndarray, shape (n,)
-        Target.
-
-    Returns
-    -------
-    ndarray, shape (p + 1,)
-        Intercept first.
-    """
-    A = np.column_stack([np.ones(len(X)), X])
-    return np.linalg.lstsq(A, y, rcond=None)[0]
 
 
 class _TemperatureCompensator(Compensator):

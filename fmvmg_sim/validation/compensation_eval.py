@@ -56,7 +56,7 @@ from ..scenario import load_scenario
 #: Name of the uncompensated output in method lists.
 RAW = "raw"
 #: Methods of the full comparison, in table order.
-ALL_METHODS = (RAW, "poly-baseline", "emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "physics")
+ALL_METHODS = (RAW, "line", "poly-baseline", "emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "physics")
 #: Frequencies of the bandwidth check, Hz.
 BANDWIDTH_FREQS_HZ = (1.0, 10.0, 50.0)
 #: Honest bias instability is read at tau >= this factor x the filter time constant.
@@ -256,11 +256,11 @@ def filter_time_constant(method: str, comp) -> tuple[float, str]:
     Returns
     -------
     (float, str)
-        The time constant and where it came from. Methods that publish
-        ``filter_time_constant_s`` in their diagnostics are taken at their word; for the
-        EMD methods it is derived here from their diagnostics: 1 / (2 pi f_c) of the Kalman
-        filter, (mean period) / (2 pi) of the longest dropped noise IMF, and the RBF's
-        embedding window (2 d + 1) / fs; 0 for raw and the poly baseline (a subtraction).
+        The time constant and where it came from. Every method publishes
+        ``filter_time_constant_s`` in its diagnostics and is taken at its word (the EMD methods
+        derive it from what they drop and filter: the Kalman filter's 1 / (2 pi f_c), the
+        longest dropped noise IMF's mean period / (2 pi), the RBF's embedding window); 0 for raw
+        and for the methods that subtract a correction.
     """
     if comp is None:
         return 0.0, "raw output"
@@ -268,25 +268,6 @@ def filter_time_constant(method: str, comp) -> tuple[float, str]:
         d = getattr(comp, attr, None) or {}
         if isinstance(d, dict) and d.get("filter_time_constant_s") is not None:
             return float(d["filter_time_constant_s"]), f"{attr}['filter_time_constant_s']"
-    if method.startswith("emd-rbf"):
-        d = dict(getattr(comp, "fit_diagnostics_", {}) or {})
-        d.update(getattr(comp, "transform_diagnostics_", {}) or {})
-        fs = float(d.get("fs_Hz") or 1.0)
-        tcs = {}
-        periods = d.get("mean_period_s") or []
-        classes = d.get("classes") or []
-        noise = [p for p, c in zip(periods, classes) if c == "noise" and np.isfinite(p)]
-        if noise:
-            tcs["dropped noise IMFs"] = max(noise) / (2 * math.pi)
-        if d.get("rbf_applied"):
-            tcs["RBF embedding"] = (2 * getattr(comp, "delay", 4) + 1) / fs / (2 * math.pi)
-        kf = d.get("kf")
-        if d.get("kf_applied") and isinstance(kf, dict) and kf.get("cutoff_Hz"):
-            tcs["Kalman filter"] = 1.0 / (2 * math.pi * float(kf["cutoff_Hz"]))
-        if tcs:
-            k = max(tcs, key=tcs.get)
-            return float(tcs[k]), f"derived: {k} ({', '.join(f'{n} {v:.3g} s' for n, v in tcs.items())})"
-        return 0.0, "derived: nothing dropped or filtered"
     return 0.0, "assumed 0: the method subtracts a correction and publishes no filter"
 
 
@@ -606,12 +587,7 @@ def evaluate(methods=ALL_METHODS, seeds: int = 5, quick: bool = False, effects: 
                                   **{k: v for k, v in allan.items() if k not in ("taus_s", "adev_dph")},
                                   **truth_figures(test, out)})
                     if comp is not None:
-                        d = getattr(comp, "transform_diagnostics_", None) or getattr(comp, "diagnostics_", None)
-                        if isinstance(d, dict):
-                            entry["diagnostics"] = {k: d[k] for k in ("classes", "n_modes", "drift_model_subtracted",
-                                                                      "fallback_temperature_only", "terms",
-                                                                      "decimated_to_Hz", "kf_applied", "n_imfs")
-                                                    if k in d}
+                        entry["diagnostics"] = run_diagnostics(comp)
                     if in_sample:
                         out_in = (np.asarray(train["rate_dps"], float) if comp is None
                                            else np.asarray(comp.transform(train), float))
@@ -652,6 +628,33 @@ def evaluate(methods=ALL_METHODS, seeds: int = 5, quick: bool = False, effects: 
                       "simulation_wall_s": cache.sim_wall_s})
     ev.summary = summarise(ev)
     return ev
+
+
+def run_diagnostics(comp) -> dict:
+    """The few diagnostics of a fitted-and-applied compensator kept per run: what it chose and did.
+
+    Parameters
+    ----------
+    comp : Compensator
+
+    Returns
+    -------
+    dict
+    """
+    out = {}
+    fit = getattr(comp, "fit_diagnostics_", None) or getattr(comp, "diagnostics_", None) or {}
+    tr = getattr(comp, "transform_diagnostics_", None) or {}
+    for d in (fit, tr):
+        out.update({k: d[k] for k in ("classes", "n_modes", "drift_model_subtracted", "fallback_temperature_only",
+                                      "terms", "decimated_to_Hz", "kf_applied", "n_imfs") if k in d})
+    sel = fit.get("selection") or (fit.get("drift_model") or {}).get("selection") or fit.get("input_selection")
+    if sel:
+        out["chosen"] = sel["chosen"]
+        out["continuation"] = (sel.get("chosen_settings") or {}).get("continuation")
+    ex = tr.get("extrapolation")
+    if ex:
+        out["extrapolated"] = bool(ex.get("any"))
+    return out
 
 
 def _rate_window(rt: Record, out: np.ndarray) -> dict:

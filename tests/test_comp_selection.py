@@ -1,0 +1,104 @@
+"""Segments, bins, chained folds, the selection rule and continuation beyond the training range."""
+
+import numpy as np
+import pytest
+
+from fmvmg_sim.compensation.segments import describe, make_bins, segment_bounds, slope_within, smooth_within
+from fmvmg_sim.compensation.selection import (Candidate, MonomialModel, chained_folds, select,
+                                              tangent_continuation)
+
+
+def gapped_ramp():
+    """A 1 K/min ramp sampled at 10 Hz in two stretches, with a 5 K step hidden in the 200 s gap."""
+    t1 = np.arange(0, 300, 0.1)
+    t2 = np.arange(500, 800, 0.1)
+    t = np.r_[t1, t2]
+    T = t / 60.0 + np.where(t >= 500, 5.0, 0.0)
+    return t, T
+
+
+def test_bins_and_derivatives_never_straddle_a_gap():
+    t, T = gapped_ramp()
+    assert segment_bounds(t) == [(0, 3000), (3000, 6000)]
+    bins = make_bins(t, 1.0)
+    assert len(bins) == 600 and set(np.unique(bins.segment)) == {0, 1}
+    Tb = bins.mean(T)
+    # a centred 120 s slope: the 5 K step across the gap would add ~2.5 K/min near it if it leaked in
+    np.testing.assert_allclose(slope_within(bins, Tb, 120.0) * 60.0, 1.0, rtol=1e-9)
+    sm = smooth_within(bins, Tb, 60.0)
+    np.testing.assert_allclose(sm[bins.segment == 1].min(), Tb[bins.segment == 1].min() + 0.25, atol=0.02)
+    back = bins.to_samples(t, Tb)
+    assert np.max(np.abs(back - T)) < 0.01  # interpolation inside each stretch
+
+
+def test_describe_recognises_bursts():
+    t = np.concatenate([k * 305.0 + np.arange(0, 5, 0.02) for k in range(25)])
+    d = describe(t)
+    assert d["bursty"] and d["segments"] == 25 and d["median_segment_s"] == pytest.approx(5.0)
+    assert d["median_gap_s"] == pytest.approx(300.02, abs=0.01)
+    assert not describe(np.arange(0, 100, 0.1))["bursty"]
+
+
+def test_chained_folds_forward_and_backward_and_by_burst():
+    t = np.concatenate([k * 300.0 + np.arange(0, 5, 0.1) for k in range(20)])
+    bins = make_bins(t, 1.0)
+    folds = chained_folds(bins, n_folds=4, min_train_fraction=0.5, by_segment=True)
+    assert len(folds) == 8
+    starts = set(np.r_[0, np.flatnonzero(np.diff(bins.segment)) + 1])
+    for fit, scored in folds:
+        assert set(fit).isdisjoint(scored)
+        assert scored[0] in starts and (scored[-1] + 1 == len(bins) or scored[-1] + 1 in starts)
+    fwd, bwd = folds[:4], folds[4:]
+    assert all(fit.max() < scored.min() for fit, scored in fwd)   # fit on the past
+    assert all(fit.min() > scored.max() for fit, scored in bwd)   # fit on the future
+    assert len(fwd[0][0]) == 50  # half of the 100 bins (10 bursts)
+
+
+def test_selection_finds_the_true_order_and_reports_every_score():
+    rng = np.random.default_rng(1)
+    t = np.arange(0, 4000.0)
+    T = 20 + 10 * np.sin(2 * np.pi * t / 2000)  # two heating/cooling cycles: every fold interpolates
+    y = 0.3 * (T - 20) - 0.05 * (T - 20) ** 2 + rng.normal(0, 0.05, t.size)
+    bins = make_bins(t, 1.0)
+    X = (bins.mean(T) - 20)[:, None]
+    cands = [Candidate(f"order {p}", "T", ["dT"], [(k,) for k in range(1, p + 1)], {"order": p}) for p in range(4)]
+    sel = select(cands, {"T": X}, bins.mean(y), bins.counts, chained_folds(bins), bins.t_s, range_vars=X)
+    assert sel.chosen.settings["order"] in (2, 3)
+    scores = {r["name"]: r["validation_rms"] for r in sel.table}
+    assert scores["order 2"] == pytest.approx(0.05, rel=0.1) and scores["order 1"] > 10 * scores["order 2"]
+    one_se = select(cands, {"T": X}, bins.mean(y), bins.counts, chained_folds(bins), rule="one-se")
+    assert one_se.chosen.settings["order"] == 2  # order 3 adds nothing the data can tell
+
+
+def test_continuation_is_the_lowest_order_the_forecasts_support():
+    """On a monotone record whose drift keeps its slope, the forecasts beyond the range choose the tangent;
+    where the drift stops at the edge of the range, they choose to hold it constant."""
+    t = np.arange(0, 4000.0)
+    T = 10 + 20 * t / t[-1]
+    for law, expected in ((lambda x: 0.2 * x, "tangent"), (lambda x: np.where(x < 12, 0.2 * x, 2.4), "constant")):
+        y = law(T - 10) + np.random.default_rng(2).normal(0, 0.01, t.size)
+        bins = make_bins(t, 1.0)
+        X = (bins.mean(T) - 20)[:, None]
+        c = Candidate("order 1", "T", ["dT"], [(1,)], {"order": 1})
+        sel = select([c], {"T": X}, bins.mean(y), bins.counts, chained_folds(bins), range_vars=X)
+        assert sel.chosen.settings["continuation"] == expected
+
+
+def test_monomial_model_tangent_plane_and_generic_continuation():
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-1, 1, (500, 2))
+    y = 1 + X[:, 0] ** 2 + 2 * X[:, 0] * X[:, 1]
+    m = MonomialModel(["a", "b"], [(2, 0), (1, 1)]).fit(X, y)
+    assert m.coefficients() == pytest.approx({"1": 1.0, "a^2": 1.0, "a*b": 2.0}, abs=1e-9)
+    x = np.array([[3.0, 0.5]])  # a = 3 lies 2 beyond the box; the plane at (1, 0.5): f = 2, df/da = 3
+    lo, hi = m.lo_, m.hi_
+    edge = np.array([[hi[0], 0.5]])
+    f_edge = 1 + edge[0, 0] ** 2 + 2 * edge[0, 0] * 0.5
+    expect = f_edge + (2 * edge[0, 0] + 2 * 0.5) * (3.0 - edge[0, 0])
+    assert m.predict(x)[0] == pytest.approx(expect, rel=1e-9)
+    # the finite-difference version used for models without an analytic gradient agrees
+    assert tangent_continuation(m._inside, x, lo, hi)[0] == pytest.approx(expect, rel=1e-3)
+    ex = m.extrapolation(x)
+    assert ex["terms_extrapolated"] == ["a^2", "a*b"] and ex["variables"]["a"]["above"] == pytest.approx(3 - hi[0])
+    m.continuation = "constant"
+    assert m.predict(x)[0] == pytest.approx(f_edge, rel=1e-9)
