@@ -143,8 +143,7 @@ def _report_blocks(comp) -> dict:
     """The selection and extrapolation reports of a fitted-and-applied compensator."""
     fit = getattr(comp, "fit_diagnostics_", None) or getattr(comp, "diagnostics_", None) or {}
     tr = getattr(comp, "transform_diagnostics_", None) or {}
-    sel = fit.get("selection") or (fit.get("drift_model") or {}).get("selection") or fit.get("input_selection")
-    return {"selection": sel, "extrapolation": tr.get("extrapolation"),
+    return {"selection": comp.selection_report(), "extrapolation": tr.get("extrapolation"),
             "notes": list(fit.get("notes") or []) + list(tr.get("notes") or [])}
 
 

@@ -110,6 +110,17 @@ class Compensator(BaseEstimator):
         """
         raise NotImplementedError
 
+    def selection_report(self) -> dict | None:
+        """What the fitted method chose by validation, and every option's score (None if it chose nothing).
+
+        Returns
+        -------
+        dict or None
+            :meth:`fmvmg_sim.compensation.selection.Selection.report` of the fit.
+        """
+        d = getattr(self, "diagnostics_", None) or getattr(self, "fit_diagnostics_", None) or {}
+        return d.get("selection") or (d.get("drift_model") or {}).get("selection")
+
     def fit_transform(self, record: Record) -> np.ndarray:
         """Fit on ``record`` and compensate the same record (in-sample).
 

@@ -281,7 +281,13 @@ class VMDWFLPCSSVR(Compensator):
             sel = TemperatureModel(dtdt_smoothing_s=(None, self.smooth_s)).fit(
                 record.time_s, record["temperature_C"], groups[DRIFT])
             self.input_cols_ = (0,) if sel.span_ is None else (0, 1)
-            diag["input_selection"] = sel.selection_.report()
+            rep = sel.selection_.report()
+            diag["selection"] = {**rep, "chosen": "CS-SVR on " + " and ".join(INPUT_NAMES[c] for c in self.input_cols_),
+                                 "chosen_settings": {"inputs": [INPUT_NAMES[c] for c in self.input_cols_],
+                                                     "continuation": "tangent"},
+                                 "linear_model_chosen": rep["chosen"],
+                                 "note": "the linear temperature models' selection on the drift modes decides "
+                                         "whether dT/dt enters the CS-SVR; C and sigma are the cuckoo search's"}
             self.svr_ = CSSVR(search=self.search, budget=self.budget, n_nests=self.n_nests,
                               n_max=self.n_max, seed=self.seed, progress=self.progress).fit(
                 self._features(record), groups[DRIFT])

@@ -647,7 +647,7 @@ def run_diagnostics(comp) -> dict:
     for d in (fit, tr):
         out.update({k: d[k] for k in ("classes", "n_modes", "drift_model_subtracted", "fallback_temperature_only",
                                       "terms", "decimated_to_Hz", "kf_applied", "n_imfs") if k in d})
-    sel = fit.get("selection") or (fit.get("drift_model") or {}).get("selection") or fit.get("input_selection")
+    sel = comp.selection_report()
     if sel:
         out["chosen"] = sel["chosen"]
         out["continuation"] = (sel.get("chosen_settings") or {}).get("continuation")

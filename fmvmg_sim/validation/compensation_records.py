@@ -204,12 +204,6 @@ def _short(m: MeasuredRecord) -> str:
     return m.name.rsplit("/", 1)[-1]
 
 
-def _chosen(comp) -> str | None:
-    d = getattr(comp, "diagnostics_", None) or getattr(comp, "fit_diagnostics_", None) or {}
-    sel = d.get("selection") or (d.get("drift_model") or {}).get("selection")
-    return sel.get("chosen") if sel else None
-
-
 def evaluate_case(case: Case, methods=METHODS, method_params: dict | None = None) -> Case:
     """Fit every method on the case's training part and score it on its test part.
 
@@ -247,7 +241,8 @@ def evaluate_case(case: Case, methods=METHODS, method_params: dict | None = None
         r = rms_dps(case.test, out)
         td = getattr(comp, "transform_diagnostics_", None) or {}
         ex = td.get("extrapolation") or {}
-        case.results[m] = {"rms_dps": r, "ratio": r / b, "chosen": _chosen(comp),
+        sel = comp.selection_report()
+        case.results[m] = {"rms_dps": r, "ratio": r / b, "chosen": sel["chosen"] if sel else None,
                            "extrapolated": ex.get("summary") if ex.get("any") else None,
                            "wall_s": time.perf_counter() - t0}
     return case
