@@ -113,11 +113,11 @@ class Bins:
             One value per sample; a segment with one bin takes that bin's value.
         """
         out = np.empty(len(t_s))
-        seg_of_sample = self.segment[self.sample_bin]
+        seg_of_sample = self.segment[self.sample_bin]  # non-decreasing: samples are in time order
         for s in self.segments():
             k = self.segment[s.start]
-            idx = np.flatnonzero(seg_of_sample == k)
-            out[idx] = np.interp(t_s[idx], self.t_s[s], values[s])
+            a, b = np.searchsorted(seg_of_sample, [k, k + 1])
+            out[a:b] = np.interp(t_s[a:b], self.t_s[s], values[s])
         return out
 
 
