@@ -57,7 +57,7 @@ def test_in_sample_pipeline_json(files, capsys):
 
 def test_default_method_and_baselines(tmp_path, capsys):
     """Without --method the selected polynomial runs; a held-out run is set beside a bias and a line in T."""
-    quiet = DriftParams(arw_dph_per_rtHz=5.0, bias_instability_dph=1.0)
+    quiet = DriftParams(arw_dph_per_rtHz=5.0, bias_instability_dph=1.0, a2_dph_per_C2=0.5)  # a curved law
     write_record(tmp_path / "train.csv", make_record(7200, 10, "ramp", "static", seed=1, params=quiet))
     write_record(tmp_path / "test.csv", make_record(1800, 10, "cooling", "static", seed=2, params=quiet))
     files = tmp_path

@@ -5,7 +5,7 @@ import pytest
 
 from fmvmg_sim.compensation.segments import describe, make_bins, segment_bounds, slope_within, smooth_within
 from fmvmg_sim.compensation.selection import (Candidate, MonomialModel, chained_folds, select,
-                                              tangent_continuation)
+                                              tangent_continuation, time_blocks)
 
 
 def gapped_ramp():
@@ -70,18 +70,25 @@ def test_selection_finds_the_true_order_and_reports_every_score():
     assert one_se.chosen.settings["order"] == 2  # order 3 adds nothing the data can tell
 
 
-def test_continuation_is_the_lowest_order_the_forecasts_support():
-    """On a monotone record whose drift keeps its slope, the forecasts beyond the range choose the tangent;
-    where the drift stops at the edge of the range, they choose to hold it constant."""
+def test_beyond_the_range_a_slope_only_where_the_blocks_reproduce_it():
+    """A drift with a real slope is carried beyond the range along it; a slope of noise is not."""
     t = np.arange(0, 4000.0)
-    T = 10 + 20 * t / t[-1]
-    for law, expected in ((lambda x: 0.2 * x, "tangent"), (lambda x: np.where(x < 12, 0.2 * x, 2.4), "constant")):
-        y = law(T - 10) + np.random.default_rng(2).normal(0, 0.01, t.size)
-        bins = make_bins(t, 1.0)
+    bins = make_bins(t, 1.0)
+    rng = np.random.default_rng(2)
+    for T, law, held in ((10 + 20 * t / t[-1], lambda x: 0.2 * x, False),      # 20 K cooling, real slope
+                         (20 + 0.1 * rng.standard_normal(t.size), lambda x: 0 * x, True)):  # a soak: noise
+        y = law(T - 10) + rng.normal(0, 0.01, t.size)
         X = (bins.mean(T) - 20)[:, None]
         c = Candidate("order 1", "T", ["dT"], [(1,)], {"order": 1})
-        sel = select([c], {"T": X}, bins.mean(y), bins.counts, chained_folds(bins), range_vars=X)
-        assert sel.chosen.settings["continuation"] == expected
+        sel = select([c], {"T": X}, bins.mean(y), bins.counts, chained_folds(bins), range_vars=X,
+                     blocks=time_blocks(bins, 8))
+        assert (sel.chosen.settings["held"] == ["dT"]) is held
+        sig = sel.chosen.settings["slope_significance"]["dT"]
+        assert (sig["t"] >= sig["t_critical"]) is not held
+        m = c.model().fit(X, bins.mean(y), bins.counts)
+        far = np.array([[40.0]])  # 30 K beyond the cooling's range, 40 K beyond the soak's
+        edge = m.predict(np.array([[X.max()]]))[0]
+        assert bool(m.predict(far)[0] == pytest.approx(edge)) is held
 
 
 def test_monomial_model_tangent_plane_and_generic_continuation():

@@ -126,7 +126,7 @@ def compare(method: str, out: np.ndarray, train: Record, record: Record) -> dict
     rel["white_noise_floor"] = floor / b if b else None
     best = min(rms, key=rms.get)
     ties = [k for k in REFERENCES if k != method and k in rms and abs(rms[k] - rms[method]) <= 1e-3 * rms[method]]
-    if ties and rms[ties[0]] <= rms[method]:
+    if ties:
         name = {"line": "a line in T", "bias": "a plain bias calibration"}[ties[0]]
         verdict = (f"{method} does as well as {name} on this record (held-out RMS {rms[method]:.4g} deg/s): "
                    "it adds nothing to it here")

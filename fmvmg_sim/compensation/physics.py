@@ -38,8 +38,11 @@ The regressors are computed on 1 s bins of the record (inside the stretches betw
 the predicted drift is interpolated back to the samples and *subtracted* from ``rate_dps``.
 The signal path is not filtered (``filter_time_constant_s`` = 0 in the diagnostics; the
 correction's own smoothing is ``correction_smoothing_s``). Beyond the box of regressor values
-seen in training the model is continued along its tangent plane, and the transform
-diagnostics say which channels left the box and by how much.
+seen in training the model is continued from the box's edge along the die temperature only
+(with the slope of a line in it fitted on the whole training range, when that slope is
+significant); the quadrature and the AGC effort are held at their edge, since they follow the
+die temperature and their own slope, fitted beside it on collinear data, is not a forecast. The
+transform diagnostics say which channels left the box and by how much.
 
 Fallback
 --------
@@ -65,7 +68,7 @@ from ..record import Record
 from .base import Compensator, register
 from .poly import check_record, complete_rows, rate_error
 from .segments import Bins, describe, make_bins, smooth_within
-from .selection import Candidate, chained_folds, select
+from .selection import Candidate, chained_folds, select, time_blocks
 from .thermal_model import UNITS, TemperatureModel, summarise_extrapolation
 
 #: Auxiliary channels the full model uses.
@@ -77,6 +80,9 @@ SMOOTHING_S = (10.0, 30.0, 120.0)
 #: Base variables of the auxiliary models and their units.
 AUX_VARS = ["Q", "dT_die", "A_agc"]
 AUX_UNITS = {"Q": "V", "dT_die": "K", "A_agc": "V", **UNITS}
+#: Auxiliary variables held at the edge of their training range rather than extrapolated: they
+#: follow the die temperature, and a slope fitted beside it on collinear data is not a forecast.
+NOT_EXTRAPOLATED = ("Q", "A_agc")
 
 
 class PhysicsFallbackWarning(UserWarning):
@@ -197,7 +203,8 @@ class PhysicsCompensator(Compensator):
                                           + ["Q", "Q, Q*dT_die"][nq - 1:nq] + ["A_agc"][:na])
                         out.append(Candidate(f"{name} ({span:g} s)", ("aux", span), AUX_VARS, e,
                                              {"die_order": die, "quadrature_terms": nq, "agc_term": bool(na),
-                                              "smoothing_s": span}))
+                                              "smoothing_s": span, "held": list(NOT_EXTRAPOLATED),
+                                              "anchor": True, "continuation": "tangent"}))
         return out
 
     def _agc_r2(self, record: Record, bins: Bins) -> float:
@@ -297,7 +304,8 @@ class PhysicsCompensator(Compensator):
             rv = [bins.mean(record["temperature_C"]) - self.T_ref_C_]
             if self.die_source_ == "drive_frequency_Hz":
                 rv.append(self._aux_base(record, bins, self.smoothing_s[0])[:, 1])
-            sel = select(cands, base, yb, bins.counts, folds, bins.t_s, self.rule, range_vars=np.column_stack(rv))
+            sel = select(cands, base, yb, bins.counts, folds, bins.t_s, self.rule, range_vars=np.column_stack(rv),
+                         blocks=time_blocks(bins, 8, sampling["bursty"]))
             self.key_ = sel.chosen.key
             self.model_ = sel.chosen.model().fit(base[self.key_], yb, bins.counts)
             if self.key_[0] == "T":
@@ -316,7 +324,7 @@ class PhysicsCompensator(Compensator):
             "condition_number": self.model_.condition_number_, "bins_1s": len(bins),
             "filter_time_constant_s": 0.0,
             "correction_smoothing_s": self.key_[1] if self.key_[0] == "aux" else self.key_[1] or 0.0,
-            "beyond_training_range": "continued along the tangent plane at the edge of the training box",
+            "beyond_training_range": {"continuation": self.model_.continuation, "held": list(self.model_.held)},
             "notes": notes + sel.notes}
         return self
 
@@ -348,6 +356,12 @@ class PhysicsCompensator(Compensator):
         X = self._base(record, bins, self.key_)
         ex = self.model_.extrapolation(X, bins.counts, AUX_UNITS)
         ex["summary"] = summarise_extrapolation(ex)
+        off = self.model_.off_data(X)[0]
+        if off.any():
+            ex["off_training_data_fraction"] = float(bins.counts[off].sum() / bins.counts.sum())
+            ex["summary"] += (f"; there ({100 * ex['off_training_data_fraction']:.0f} % of the record) the model takes "
+                              "its value at the training point nearest in die temperature, continued along the die "
+                              "temperature")
         self.transform_diagnostics_ = {"extrapolation": ex, "sampling": describe(record.time_s),
                                        "filter_time_constant_s": 0.0, "notes": [gap_note] if gap_note else []}
         out = np.full(len(full), np.nan)

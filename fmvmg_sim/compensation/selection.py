@@ -9,21 +9,22 @@ span, a set of auxiliary regressors) chooses it the same way:
    ``1 - min_train_fraction`` of the record (by sample count), and on a record of bursts
    they are moved to the nearest burst boundary (a burst is never split between fitting and
    scoring).
-2. **Score.** The pooled RMS of the scored bins' residuals (bins weighted by sample count).
-   The *structure* is scored on the forecasts that stay inside the range the fold was fitted
-   on (the temperature range, say), where a structure's shape is what is tested; a record
-   that only ever leaves its past range (a monotone cooling) is scored on all its forecasts.
-3. **Rule.** The candidate with the lowest score (``rule="best"``, the default); among
-   equal scores the one with fewer coefficients. ``rule="one-se"`` takes instead the simplest
-   candidate whose fold-by-fold mean squared error is within one standard error of the best
-   (the "one-standard-error rule"); with the four to eight folds a record affords, that
-   standard error is wide and the rule measurably chose too simple a model on simulated oven
-   runs, so it is an option, not the default.
-4. **Beyond the range.** For the chosen structure, the forecasts that left their fold's
-   fitted range choose how the model continues beyond the training range: held at its value
-   at the edge (order 0) unless continuing along its tangent there (order 1) forecasts them
-   better. Curvature is never extrapolated. With no such forecast the tangent is kept, and
-   the report says it was not tested.
+2. **Score.** Each option forecasts each fold's scored block as it will be used (beyond the
+   range it was fitted on, it continues from its edge value along the slope of a line fitted
+   on that range); the score is the pooled RMS of the scored bins' residuals (bins weighted by
+   sample count).
+3. **Rule.** The option with the lowest score (``rule="best"``, the default); among equal
+   scores the one with fewer coefficients. ``rule="one-se"`` takes instead the simplest
+   option whose fold-by-fold mean squared error is within one standard error of the best
+   (the "one-standard-error rule"); with the eight folds a record affords that standard
+   error is wide, and the rule measurably chose too simple a model on simulated oven runs, so
+   it is an option, not the default.
+4. **Beyond the range.** Curvature is never extrapolated. Beyond the training range the
+   chosen model continues from its value at the range's edge along the slope of a line
+   fitted on the whole range, for each variable whose slope is significant: refitted on
+   contiguous time blocks of the record, it differs from zero at the :data:`SLOPE_ALPHA`
+   level (Student t). Along any other variable it is held constant: a line fitted on a soak's
+   0.3 K of sensor noise must not be carried 35 K.
 
 :class:`MonomialModel` is the least-squares model the candidates are made of: an intercept
 plus monomials of a few base variables (``dT``, ``dT^2``, ``dT/dt``, ``Q*dT_die``...). Where a
@@ -39,6 +40,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
+from scipy.stats import t as student_t
 
 from .segments import Bins
 
@@ -87,7 +90,7 @@ def term_name(names: list[str], e) -> str:
 
 @dataclass
 class MonomialModel:
-    """``y = c0 + sum_k c_k prod_j x_j^e_kj``, weighted least squares, tangent continuation outside the box.
+    """``y = c0 + sum_k c_k prod_j x_j^e_kj`` by weighted least squares, continued without curvature outside its box.
 
     Parameters
     ----------
@@ -95,14 +98,29 @@ class MonomialModel:
         Names of the base variables (columns of ``X``).
     exponents : list of tuple of int
         One exponent tuple per term (no constant term: the intercept is always there).
-    continuation : {"tangent", "constant"}
-        Beyond the box: along the tangent plane at its nearest point (order 1), or held at the
-        value there (order 0).
+    continuation : {"constant", "slope", "tangent"}
+        Beyond the box, from the model's value at the nearest point of the box: held there
+        (``constant``); along the slopes of a first-order model fitted on the whole box
+        (``slope``, the most robustly estimated slope); or along the model's own tangent plane
+        there (``tangent``).
+    held : tuple of str
+        Variables along which the model is held constant beyond the box whatever
+        ``continuation`` says (their slope is not significant, :func:`slope_significance`, or
+        they are not to be extrapolated at all); the slopes of the others are fitted without them.
+    anchor : bool
+        Beyond the training range of a non-held variable, take the model's value at the
+        training point nearest in the non-held variables, continued from there along their
+        slopes (:meth:`off_data`), instead of clamping each variable to its own range. For
+        correlated variables (a quadrature that follows the die temperature), whose coefficients
+        cancel along the data and are arbitrary across it, a clamped corner of the box is a
+        combination the data never fixed.
     """
 
     var_names: list
     exponents: list
     continuation: str = "tangent"
+    held: tuple = ()
+    anchor: bool = False
     coef_: np.ndarray | None = field(default=None, repr=False)
 
     def _E(self) -> np.ndarray:
@@ -148,7 +166,55 @@ class MonomialModel:
         r = np.sqrt(w)
         self.coef_ = np.linalg.lstsq(A * r[:, None], y * r, rcond=1e-10)[0]
         self.condition_number_ = float(np.linalg.cond(A[:, np.isfinite(np.r_[1.0, self.scale_])] * r[:, None]))
+        used = np.array([j for j in np.flatnonzero(self._E().any(axis=0)) if self.var_names[j] not in self.held],
+                        dtype=int)
+        self.slope_ = np.zeros(X.shape[1])
+        if used.size:
+            Xu = X[:, used] - sw @ X[:, used]
+            self.slope_[used] = np.linalg.lstsq(np.column_stack([np.ones(len(y)), Xu]) * r[:, None], y * r,
+                                                rcond=1e-10)[0][1:]
+        if self.anchor:
+            self._fit_anchor(X)
         return self
+
+    #: Training points kept for the nearest-neighbour anchor (a stride subsample beyond this).
+    ANCHOR_MAX_POINTS = 20_000
+
+    def _fit_anchor(self, X: np.ndarray) -> None:
+        used = np.flatnonzero(self._E().any(axis=0))
+        free = np.array([j for j in used if self.var_names[j] not in self.held], dtype=int)
+        self.anchor_free_ = free if free.size else used
+        step = max(1, len(X) // self.ANCHOR_MAX_POINTS)
+        self.anchor_X_ = X[::step].copy()
+        sd = X[:, self.anchor_free_].std(axis=0)
+        self.anchor_scale_ = np.where(sd > 0, sd, 1.0)
+        self.anchor_tree_ = cKDTree(self.anchor_X_[:, self.anchor_free_] / self.anchor_scale_)
+
+    def off_data(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rows beyond the training range of a variable that is not held, and the training row each is anchored to.
+
+        Such a row is evaluated at the training row nearest to it in the variables that are not
+        held (for ``physics``: the die temperature), so the held variables take the values they
+        had there instead of a combination never seen in training.
+
+        Parameters
+        ----------
+        X : ndarray, shape (n, n_vars)
+
+        Returns
+        -------
+        (ndarray of bool, ndarray of int)
+            All False (and zeros) for a model fitted without ``anchor``.
+        """
+        X = np.asarray(X, dtype=float).reshape(-1, len(self.var_names))
+        if not self.anchor:
+            return np.zeros(len(X), dtype=bool), np.zeros(len(X), dtype=int)
+        F = X[:, self.anchor_free_]
+        off = np.any((F < self.lo_[self.anchor_free_]) | (F > self.hi_[self.anchor_free_]), axis=1)
+        idx = np.zeros(len(X), dtype=int)
+        if off.any():
+            idx[off] = self.anchor_tree_.query(F[off] / self.anchor_scale_)[1]
+        return off, idx
 
     def _inside(self, X: np.ndarray) -> np.ndarray:
         P = _monomials(X, self._E())
@@ -166,11 +232,17 @@ class MonomialModel:
         ndarray, shape (n,)
         """
         X = np.asarray(X, dtype=float).reshape(-1, len(self.var_names))
+        off, nn = self.off_data(X)
         Xc = np.clip(X, self.lo_, self.hi_)
+        Xc[off] = self.anchor_X_[nn[off]] if off.any() else Xc[off]
         out = self._inside(Xc)
-        if self.continuation == "constant":
-            return out
         d = X - Xc
+        for v in self.held:
+            d[:, self.var_names.index(v)] = 0.0
+        if self.continuation == "constant" or not d.any():
+            return out
+        if self.continuation == "slope":
+            return out + d @ self.slope_
         E = self._E()
         for j in np.flatnonzero(np.any(d != 0, axis=0)):
             g = (_monomial_grad(Xc, E, j) / self.scale_) @ self.coef_[1:]
@@ -227,7 +299,7 @@ class MonomialModel:
                         if sum(e) > 1 and t not in curved:
                             curved.append(t)
         return {"variables": out, "terms_extrapolated": touched, "terms_continued_linearly": curved,
-                "continuation": self.continuation, "any": bool(touched)}
+                "continuation": self.continuation, "held": [v for v in self.held if v in out], "any": bool(touched)}
 
 
 def box_extrapolation(var_names: list, X: np.ndarray, lo, hi, weights=None, units: dict | None = None) -> dict:
@@ -367,6 +439,84 @@ def chained_folds(bins: Bins, n_folds: int = 4, min_train_fraction: float = 0.5,
     return folds
 
 
+def time_blocks(bins: Bins, n_blocks: int = 4, by_segment: bool = False) -> list[np.ndarray]:
+    """Contiguous blocks of bins of about equal sample count (cut between bursts when ``by_segment``).
+
+    Parameters
+    ----------
+    bins : Bins
+    n_blocks : int
+    by_segment : bool
+
+    Returns
+    -------
+    list of ndarray
+        Bin indices per block (empty blocks dropped).
+    """
+    cuts = _cuts(bins.counts, bins.segment, n_blocks - 1, 1.0 / n_blocks, by_segment) if n_blocks > 1 else []
+    edges = np.concatenate(([0], cuts, [len(bins)]))
+    return [np.arange(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+#: A whole-range slope is used beyond the range only when it differs from zero at this two-sided
+#: significance level (Student t over the record's time blocks).
+SLOPE_ALPHA = 0.05
+
+
+def slope_significance(X: np.ndarray, y: np.ndarray, w: np.ndarray, blocks: list[np.ndarray],
+                       var_names: list) -> dict:
+    """Whether the slope of a first-order model in each variable is reproducible from block to block.
+
+    The first-order model is refitted on each contiguous block of the record; the standard error
+    of each variable's whole-range slope is the scatter of the block slopes (each weighted by the
+    block's spread of that variable, so a block where it hardly moves counts little) over the
+    root of the number of blocks. Time blocks, not samples, carry the error: slow noise makes
+    neighbouring samples agree, blocks do not.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, n_vars)
+        Base variables per bin.
+    y, w : ndarray
+        Target and weights per bin.
+    blocks : list of ndarray
+        From :func:`time_blocks`.
+    var_names : list of str
+
+    Returns
+    -------
+    dict
+        Per variable: ``slope``, ``standard_error``, ``t``, ``t_critical`` (two-sided Student t at
+        :data:`SLOPE_ALPHA` with one degree of freedom fewer than the usable blocks) and
+        ``significant``; with fewer than three usable blocks nothing is significant.
+    """
+    def fit(idx):
+        Xi = X[idx] - np.average(X[idx], axis=0, weights=w[idx])
+        r = np.sqrt(w[idx])
+        coef = np.linalg.lstsq(np.column_stack([np.ones(len(idx)), Xi]) * r[:, None], y[idx] * r, rcond=1e-10)[0]
+        return coef[1:], (w[idx][:, None] * Xi * Xi).sum(axis=0)
+
+    whole, _ = fit(np.arange(len(y)))
+    per = [fit(b) for b in blocks if len(b) > X.shape[1] + 1]
+    out = {}
+    for j, name in enumerate(var_names):
+        sb = np.array([p[0][j] for p in per])
+        wb = np.array([p[1][j] for p in per])
+        ok = wb > 0
+        if ok.sum() < 3:
+            out[name] = {"slope": float(whole[j]), "standard_error": None, "t": None, "t_critical": None,
+                         "significant": False}
+            continue
+        sb, wb = sb[ok], wb[ok]
+        mean = np.sum(wb * sb) / wb.sum()
+        se = float(np.sqrt(np.sum(wb * (sb - mean) ** 2) / ((len(sb) - 1) * wb.sum())))
+        t = abs(whole[j]) / se if se > 0 else np.inf
+        tc = float(student_t.ppf(1.0 - SLOPE_ALPHA / 2.0, len(sb) - 1))
+        out[name] = {"slope": float(whole[j]), "standard_error": se, "t": float(t), "t_critical": tc,
+                     "significant": bool(t >= tc)}
+    return out
+
+
 @dataclass
 class Candidate:
     """One structure to score.
@@ -394,7 +544,8 @@ class Candidate:
     def model(self) -> MonomialModel:
         """A fresh, unfitted model of this structure (and of its continuation, once chosen)."""
         return MonomialModel(list(self.var_names), [tuple(e) for e in self.exponents],
-                             self.settings.get("continuation", "tangent"))
+                             self.settings.get("continuation", "tangent"), tuple(self.settings.get("held", ())),
+                             bool(self.settings.get("anchor", False)))
 
     @property
     def n_coef(self) -> int:
@@ -442,32 +593,32 @@ class Selection:
 RULES = ("one-se", "best")
 
 
-#: A fold's forecasts inside the fitted range choose the structure when they carry at least
-#: this fraction of the scored samples (else all forecasts do).
-MIN_INSIDE_FRACTION = 0.05
-#: Continuations beyond the training range, lowest order first.
-CONTINUATIONS = ("constant", "tangent")
+#: Continuations beyond the training range, the most conservative first.
+CONTINUATIONS = ("constant", "slope", "tangent")
 
 
-def _inside_mask(R: np.ndarray | None, tr: np.ndarray, va: np.ndarray) -> np.ndarray:
-    """Which scored bins lie inside the box the fold was fitted on (all of them without ``R``)."""
+def _inside_share(R: np.ndarray | None, tr: np.ndarray, va: np.ndarray, w: np.ndarray) -> float:
+    """Share of a fold's scored samples inside the box it was fitted on."""
     if R is None or R.shape[1] == 0:
-        return np.ones(len(va), dtype=bool)
+        return 1.0
     lo, hi = R[tr].min(axis=0), R[tr].max(axis=0)
-    return np.all((R[va] >= lo) & (R[va] <= hi), axis=1)
+    ins = np.all((R[va] >= lo) & (R[va] <= hi), axis=1)
+    return float(w[va][ins].sum() / w[va].sum())
 
 
 def select(candidates: list[Candidate], base: dict, y: np.ndarray, w: np.ndarray,
            folds: list[tuple[np.ndarray, np.ndarray]], bins_t_s: np.ndarray | None = None,
-           rule: str = "best", range_vars: np.ndarray | None = None, continuation: str = "auto") -> Selection:
-    """Score every candidate on forward-chained folds; choose one, then its continuation.
+           rule: str = "best", range_vars: np.ndarray | None = None, continuation: str = "auto",
+           blocks: list[np.ndarray] | None = None) -> Selection:
+    """Score every candidate on chained folds; choose one, then how it continues beyond its range.
 
-    The structure is chosen on the forecasts that stay inside the range the fold was fitted
-    on (``range_vars``), when they carry at least :data:`MIN_INSIDE_FRACTION` of the scored
-    samples: that is where a structure's shape matters. Then, for the chosen structure, the
-    forecasts that leave the range choose how it continues beyond it: held constant unless
-    continuing along the tangent forecasts them better (the lowest order the validation
-    supports). With no forecast beyond the range the tangent is kept (said in the notes).
+    Every candidate forecasts each fold's scored block as it will be used: beyond the range it
+    was fitted on, it continues from its edge value along the slope of a line fitted on that
+    range. The lowest pooled score wins (``rule="best"``; ``"one-se"``: the simplest candidate
+    within one standard error of it). The chosen model then continues beyond the training range
+    along the whole-range slope of each variable that slope is significant for
+    (:func:`slope_significance` over the record's time blocks), and is held constant along the
+    others.
 
     Parameters
     ----------
@@ -486,125 +637,98 @@ def select(candidates: list[Candidate], base: dict, y: np.ndarray, w: np.ndarray
     rule : {"best", "one-se"}
         The best score, or the simplest candidate within one standard error of it.
     range_vars : ndarray, shape (n_bins, k), optional
-        The variables whose training range defines "inside" (e.g. the temperature); None:
-        every forecast counts as inside.
-    continuation : {"auto", "tangent", "constant"}
-        How the chosen model continues beyond its training range: chosen by the forecasts
-        beyond their fitted range (``"auto"``), or fixed.
+        Variables whose fitted range each fold reports how much of its forecast left.
+    continuation : {"auto", "constant", "slope", "tangent"}
+        How the chosen model continues beyond its training range: as above (``"auto"``), or
+        fixed.
+    blocks : list of ndarray, optional
+        Contiguous blocks of the record (:func:`time_blocks`) for :func:`slope_significance`;
+        None: every slope counts as significant.
 
     Returns
     -------
     Selection
-        ``chosen`` carries ``settings["continuation"]``.
+        ``chosen`` carries ``settings["continuation"]`` and ``settings["held"]``.
     """
     if rule not in RULES:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+    if continuation not in ("auto",) + CONTINUATIONS:
+        raise ValueError(f"continuation must be 'auto' or one of {CONTINUATIONS}, got {continuation!r}")
     notes = []
     fold_info = []
-    inside = [_inside_mask(range_vars, tr, va) for tr, va in folds]
-    for (tr, va), ins in zip(folds, inside):
+    for tr, va in folds:
         info = {"fit_bins": int(len(tr)), "scored_bins": int(len(va)),
-                "scored_inside_fit_range": float(w[va][ins].sum() / w[va].sum())}
+                "scored_inside_fit_range": _inside_share(range_vars, tr, va, w)}
         if bins_t_s is not None:
             info["scored_from_s"], info["scored_to_s"] = float(bins_t_s[va[0]]), float(bins_t_s[va[-1]])
         fold_info.append(info)
-    if not folds:
-        c = min(candidates, key=lambda c: c.n_coef)
-        c.settings["continuation"] = "tangent" if continuation == "auto" else continuation
-        notes.append("too few bins or bursts to validate: the simplest candidate is used")
-        return Selection(c, c, [{"name": c.name, "n_coef": c.n_coef, "settings": c.settings,
-                                 "validation_rms": None}], [], rule, notes)
-    w_in = np.array([w[va][ins].sum() for (_, va), ins in zip(folds, inside)])
-    w_all = np.array([w[va].sum() for _, va in folds])
-    use_inside = w_in.sum() >= MIN_INSIDE_FRACTION * w_all.sum()
-    notes.append("structure chosen on the forecasts inside each fold's fitted range "
-                 f"({100 * w_in.sum() / w_all.sum():.0f} % of the scored samples)" if use_inside else
-                 "structure chosen on all forecasts: only "
-                 f"{100 * w_in.sum() / w_all.sum():.0f} % of them stay inside the fitted range")
     nf = len(folds)
-    sse = np.full((len(candidates), nf), np.inf)
+    mse = np.full((len(candidates), nf), np.inf)
     for i, c in enumerate(candidates):
         X = base[c.key]
-        for f, ((tr, va), ins) in enumerate(zip(folds, inside)):
+        for f, (tr, va) in enumerate(folds):
             if len(tr) <= c.n_coef:
                 continue  # under-determined on this fold: it cannot be scored there
             m = c.model().fit(X[tr], y[tr], w[tr])
+            m.continuation = c.settings.get("continuation", "slope")
             r = y[va] - m.predict(X[va])
-            sel = ins if use_inside else np.ones(len(va), dtype=bool)
-            sse[i, f] = float(np.sum(w[va][sel] * r[sel] ** 2))
-    fw = w_in if use_inside else w_all
-    scored = fw > 0
-    finite = np.isfinite(sse[:, scored]).all(axis=1)
+            mse[i, f] = float(np.sum(w[va] * r * r) / np.sum(w[va]))
+    fw = np.array([w[va].sum() for _, va in folds])
+    finite = np.isfinite(mse).all(axis=1) if nf else np.zeros(len(candidates), dtype=bool)
     if not finite.any():
-        c = min(candidates, key=lambda c: c.n_coef)
-        notes.append("no candidate could be fitted on every fold: the simplest candidate is used")
-        finite[candidates.index(c)] = True
-        sse[candidates.index(c)] = 0.0
-    mse = np.where(scored, sse / np.where(scored, fw, 1.0), np.nan)
-    pooled = np.where(finite, np.sqrt(np.nansum(np.where(scored, sse, 0.0), axis=1) / fw.sum()), np.inf)
-    ib = min(range(len(candidates)), key=lambda i: (pooled[i], candidates[i].n_coef))
-    table, ok = [], []
-    for i, c in enumerate(candidates):
-        row = {"name": c.name, "n_coef": c.n_coef, "settings": dict(c.settings),
-               "validation_rms": float(pooled[i]) if finite[i] else None,
-               "fold_mse": [float(v) if np.isfinite(v) else None for v in mse[i]]}
-        if finite[i]:
-            d = (mse[i] - mse[ib])[scored]
-            se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
-            row["excess_mse_over_best"], row["standard_error"] = float(d.mean()), se
-            row["within_one_se"] = bool(d.mean() <= se)
-            if row["within_one_se"]:
-                ok.append(i)
+        ic = min(range(len(candidates)), key=lambda i: candidates[i].n_coef)
+        notes.append("too few bins or bursts to validate: the simplest candidate is used")
+        table = [{"name": c.name, "n_coef": c.n_coef, "settings": dict(c.settings), "validation_rms": None}
+                 for c in candidates]
+        ib = ic
+    else:
+        pooled = np.where(finite, np.sqrt(np.where(finite[:, None], mse, 0.0) @ fw / fw.sum()), np.inf)
+        ib = min(range(len(candidates)), key=lambda i: (pooled[i], candidates[i].n_coef))
+        table, ok = [], []
+        for i, c in enumerate(candidates):
+            row = {"name": c.name, "n_coef": c.n_coef, "settings": dict(c.settings),
+                   "validation_rms": float(pooled[i]) if finite[i] else None,
+                   "fold_mse": [float(v) if np.isfinite(v) else None for v in mse[i]]}
+            if finite[i]:
+                d = mse[i] - mse[ib]
+                se = float(np.std(d, ddof=1) / np.sqrt(nf)) if nf > 1 else 0.0
+                row["excess_mse_over_best"], row["standard_error"] = float(d.mean()), se
+                row["within_one_se"] = bool(d.mean() <= se)
+                if row["within_one_se"]:
+                    ok.append(i)
+            else:
+                row["within_one_se"] = False
+                row["note"] = "not scored: more coefficients than bins on a fold"
+            table.append(row)
+        if rule == "best" or nf < 2:
+            ic = ib
+            if nf < 2 and rule != "best":
+                notes.append("one fold only: no standard error, the best score is taken")
         else:
-            row["within_one_se"] = False
-            row["note"] = "not scored: more coefficients than bins on a fold"
-        table.append(row)
-    if rule == "best" or scored.sum() < 2:
-        ic = ib
-        if scored.sum() < 2 and rule != "best":
-            notes.append("one scored fold only: no standard error, the best score is taken")
-    else:
-        ic = min(ok, key=lambda i: (candidates[i].n_coef, pooled[i]))
+            ic = min(ok, key=lambda i: (candidates[i].n_coef, pooled[i]))
     chosen = candidates[ic]
-    if continuation == "auto":
-        chosen.settings["continuation"], cont_scores = _continuation(chosen, base, y, w, folds, inside, notes)
-    else:
-        chosen.settings["continuation"], cont_scores = continuation, {}
-    table[ic]["continuation_rms_beyond_range"] = cont_scores
+    _set_continuation(chosen, base[chosen.key], y, w, blocks, continuation, notes)
+    table[ic]["settings"] = dict(chosen.settings)
     return Selection(chosen, candidates[ib], table, fold_info, rule, notes)
 
 
-def _continuation(c: Candidate, base: dict, y, w, folds, inside, notes: list) -> tuple[str, dict]:
-    """Constant or tangent beyond the fitted range: the lowest order the forecasts beyond it support.
-
-    The tangent is taken only when it forecasts the bins beyond each fold's fitted range better
-    than the constant by more than one standard error of the fold-by-fold difference (with a
-    single such fold, by any margin).
-    """
-    X = base[c.key]
-    per_fold = []
-    for (tr, va), ins in zip(folds, inside):
-        out = ~ins
-        if not out.any() or len(tr) <= c.n_coef:
-            continue
-        m = c.model().fit(X[tr], y[tr], w[tr])
-        wo = w[va][out]
-        mse = {}
-        for k in CONTINUATIONS:
-            m.continuation = k
-            r = y[va][out] - m.predict(X[va][out])
-            mse[k] = float(np.sum(wo * r * r) / wo.sum())
-        per_fold.append((float(wo.sum()), mse))
-    if not per_fold:
-        notes.append("no forecast left the fitted range: beyond the training range the model continues "
-                     "along its tangent (untested on this record)")
-        return "tangent", {}
-    wt = np.array([p[0] for p in per_fold])
-    rms = {k: float(np.sqrt(np.sum(wt * [p[1][k] for p in per_fold]) / wt.sum())) for k in CONTINUATIONS}
-    gain = np.array([p[1]["constant"] - p[1]["tangent"] for p in per_fold])
-    se = float(np.std(gain, ddof=1) / np.sqrt(len(gain))) if len(gain) > 1 else 0.0
-    pick = "tangent" if gain.mean() > se else "constant"
-    notes.append(f"beyond the training range: {pick} continuation (forecasts beyond their fitted range in "
-                 f"{len(gain)} folds, RMS " + ", ".join(f"{k} {v:.4g}" for k, v in rms.items())
-                 + ("" if pick == "tangent" else "; the tangent is not better by one standard error") + ")")
-    return pick, {**rms, "folds": len(gain), "tangent_gain_mse": float(gain.mean()), "standard_error": se}
+def _set_continuation(c: Candidate, X: np.ndarray, y, w, blocks, continuation: str, notes: list) -> None:
+    """Whole-range slope along the variables whose slope is significant, constant along the others."""
+    fixed = list(c.settings.get("held", ()))
+    used = [j for j in range(X.shape[1]) if any(e[j] for e in c.exponents) and c.var_names[j] not in fixed]
+    if continuation != "auto":
+        c.settings.update({"continuation": continuation, "held": fixed})
+        return
+    names = [c.var_names[j] for j in used]
+    sig = slope_significance(X[:, used], y, w, blocks, names) if blocks is not None and used else {}
+    held = [n for n, v in sig.items() if not v["significant"]]
+    c.settings.update({"continuation": c.settings.get("continuation", "slope"), "held": fixed + held,
+                       "slope_significance": sig})
+    if held:
+        notes.append("beyond the training range held constant along " + ", ".join(
+            f"{n} (slope t = " + ("n/a" if sig[n]["t"] is None else f"{sig[n]['t']:.2g}") + ")" for n in held)
+            + f": its whole-range slope is not significantly different from zero ({100 * SLOPE_ALPHA:g} % level, "
+              "Student t over the record's time blocks)")
+    if len(held) < len(used):
+        notes.append("beyond the training range continued along the slope of a line fitted on the whole range"
+                     + (f" in {', '.join(n for n in names if n not in held)}" if held else ""))

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .segments import Bins, describe, make_bins, slope_within
-from .selection import Candidate, Selection, chained_folds, select
+from .selection import Candidate, Selection, chained_folds, select, time_blocks
 
 #: Polynomial orders offered by default.
 ORDERS = (0, 1, 2, 3)
@@ -32,6 +32,9 @@ TREND_SLOPE_S = 10.0
 UNITS = {"dT": "K", "dTdt": "K/min"}
 #: How the model continues beyond its training range, in words.
 CONTINUATION_TEXT = {"tangent": "continued along the tangent at the range's edge (no curvature extrapolated)",
+                     "slope": "continued from its value at the range's edge along the slope of a line fitted on "
+                              "the whole range, and held there along a variable whose slope is not significant "
+                              "(no curvature extrapolated)",
                      "constant": "held at its value at the range's edge (the validation did not support a slope "
                                  "beyond the range)"}
 
@@ -174,7 +177,8 @@ class TemperatureModel:
         base = {s: self.base(bins, Tb, s) for s in spans}
         folds = chained_folds(bins, self.n_folds, self.min_train_fraction, by_segment=self.sampling_["bursty"])
         sel = select(self.candidates(spans), base, yb, bins.counts, folds, bins.t_s, self.rule,
-                     range_vars=(Tb - self.T_ref_C_)[:, None], continuation=self.continuation)
+                     range_vars=(Tb - self.T_ref_C_)[:, None], continuation=self.continuation,
+                     blocks=time_blocks(bins, 8, self.sampling_["bursty"]))
         sel.notes = notes + sel.notes
         self.selection_: Selection = sel
         self.span_ = sel.chosen.key
@@ -236,7 +240,8 @@ class TemperatureModel:
         return {"selection": self.selection_.report(), "terms": self.model_.terms,
                 "coef_dps": self.model_.coefficients(), "T_ref_C": self.T_ref_C_,
                 "training_temperature_range_C": list(self.T_range_C_), "sampling": self.sampling_,
-                "beyond_training_range": CONTINUATION_TEXT[self.model_.continuation]}
+                "beyond_training_range": {"continuation": self.model_.continuation, "held": list(self.model_.held),
+                                          "how": CONTINUATION_TEXT[self.model_.continuation]}}
 
 
 def summarise_extrapolation(ex: dict) -> str:
@@ -264,8 +269,16 @@ def summarise_extrapolation(ex: dict) -> str:
             parts.append(f"{name} goes {' and '.join(side)} the training range "
                          f"({100 * d['fraction_outside']:.0f} % of the record)")
     s = "; ".join(parts) + f"; terms extrapolated: {', '.join(ex['terms_extrapolated'])}"
-    if ex.get("continuation") == "constant":
-        s += " (held at their value at the range's edge)"
-    elif ex["terms_continued_linearly"]:
-        s += f" (continued along the tangent: {', '.join(ex['terms_continued_linearly'])})"
+    out = [n for n, d in ex["variables"].items() if d["below"] > 0 or d["above"] > 0]
+    held = [n for n in out if ex.get("continuation") == "constant" or n in ex.get("held", ())
+            or (n == "temperature_C" and "dT" in ex.get("held", ()))]
+    moving = [n for n in out if n not in held]
+    how = []
+    if held:
+        how.append(f"held at its value at the range's edge along {', '.join(held)}")
+    if moving:
+        how.append({"slope": "continued along the slope of a line fitted on the whole training range",
+                    "tangent": "continued along the tangent at the range's edge"}[ex.get("continuation", "tangent")]
+                   + f" along {', '.join(moving)}")
+    s += " (" + "; ".join(how) + ")"
     return s

@@ -193,15 +193,13 @@ def make_cases(records: list[MeasuredRecord]) -> list[Case]:
                 continue
             Tm, Tn = (np.nanpercentile(r.record["temperature_C"], [1, 99]) for r in (m, n))
             if Tm[1] < Tn[0] or Tn[1] < Tm[0]:
-                cases += [Case(f"{m.name} x {n.name.rsplit('/', 1)[-1]}", f"{_short(m)} -> {_short(n)}",
-                               m.record, n.record),
-                          Case(f"{m.name} x {n.name.rsplit('/', 1)[-1]}", f"{_short(n)} -> {_short(m)}",
-                               n.record, m.record)]
+                cases += [Case(m.group, f"{_short(m)} -> {_short(n)}", m.record, n.record),
+                          Case(m.group, f"{_short(n)} -> {_short(m)}", n.record, m.record)]
     return cases
 
 
 def _short(m: MeasuredRecord) -> str:
-    return m.name.rsplit("/", 1)[-1]
+    return m.name.rsplit("/", 1)[-1].split("[")[0]
 
 
 def evaluate_case(case: Case, methods=METHODS, method_params: dict | None = None) -> Case:
@@ -243,6 +241,7 @@ def evaluate_case(case: Case, methods=METHODS, method_params: dict | None = None
         ex = td.get("extrapolation") or {}
         sel = comp.selection_report()
         case.results[m] = {"rms_dps": r, "ratio": r / b, "chosen": sel["chosen"] if sel else None,
+                           "continuation": (sel.get("chosen_settings") or {}).get("continuation") if sel else None,
                            "extrapolated": ex.get("summary") if ex.get("any") else None,
                            "wall_s": time.perf_counter() - t0}
     return case
@@ -285,7 +284,7 @@ def markdown(cases: list[Case], methods=METHODS) -> str:
     str
     """
     head = (["record", "fitted -> applied"] + [f"`{m}`" for m in methods]
-            + ["floor", "bias RMS (deg/s)", "default / best of line, poly"])
+            + ["floor", "bias RMS (deg/s)", f"{DEFAULT_METHOD} chose", f"{DEFAULT_METHOD} / line"])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     refusals = {}
     for c in cases:
@@ -300,10 +299,12 @@ def markdown(cases: list[Case], methods=METHODS) -> str:
                 cells.append(f"{res['ratio']:.3f}")
             else:
                 cells.append("")
-        chk = target_check(c)
-        tgt = "" if chk["ok"] is None else (f"{chk['ratio']:.3f}" + (" (line wins)" if chk["winner"] == "line"
-                                                                       else ""))
-        cells += [f"{c.references['floor_ratio']:.3f}", f"{c.references['bias_rms_dps']:.4g}", tgt]
+        d, line = c.results.get(DEFAULT_METHOD, {}), c.results.get("line", {})
+        vs = (f"{d['rms_dps'] / line['rms_dps']:.3f}" + (" (line wins)" if line["rms_dps"] < d["rms_dps"] else "")
+              if "rms_dps" in d and "rms_dps" in line else "")
+        cont = f", {d['continuation']}" if d.get("continuation") and d.get("extrapolated") else ""
+        cells += [f"{c.references['floor_ratio']:.3f}", f"{c.references['bias_rms_dps']:.4g}",
+                  (d.get("chosen") or "") + cont, vs]
         lines.append("| " + " | ".join(cells) + " |")
     if refusals:
         lines += [""] + [f"[{k}] {why}" for why, k in refusals.items()]
