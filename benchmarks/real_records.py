@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/real_records.py [--data ../shared/data] [--methods M,...] [--json OUT.json]
+    python benchmarks/real_records.py [--data ../shared/data] [--methods M,...] [--json OUT.json] [--independent]
 
 Each measured record is fitted on its first half in time and applied to its second half, and
 the reverse; records of the same sensor and axis at temperatures that do not overlap (the
@@ -42,10 +42,13 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=None, help="shared data folder (default: see above)")
     ap.add_argument("--methods", default=",".join(R.METHODS), help="comma-separated methods")
     ap.add_argument("--json", type=Path, help="also write every figure to this JSON file")
+    ap.add_argument("--independent", action="store_true",
+                    help="also run on independent-dev, the records of an independent generator (slow: hours-long "
+                         "records, every method)")
     a = ap.parse_args(argv)
     data = a.data or default_data_dir()
     methods = [m.strip() for m in a.methods.split(",") if m.strip()]
-    records, skipped = R.load_records(data)
+    records, skipped = R.load_records(data, independent=a.independent)
     cases = R.make_cases(records)
     t0 = time.perf_counter()
     for c in tqdm(cases, desc="real records", unit="case", file=sys.stderr):

@@ -19,7 +19,10 @@ method that needs even sampling) is reported as refused, with the reason it give
 
 from __future__ import annotations
 
+import gzip
 import re
+import shutil
+import tempfile
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -63,7 +66,18 @@ class MeasuredRecord:
     record: Record
 
 
-def load_records(data_dir: str | Path) -> tuple[list[MeasuredRecord], dict]:
+def _read_gz_record(path: Path) -> Record:
+    """A gzip-compressed record, read through a temporary plain copy."""
+    with tempfile.TemporaryDirectory() as tmp:
+        plain = Path(tmp) / path.name[:-3]
+        with gzip.open(path, "rb") as src, open(plain, "wb") as dst:
+            shutil.copyfileobj(src, dst)
+        rec = read_record(plain)
+    rec.path = str(path)
+    return rec
+
+
+def load_records(data_dir: str | Path, independent: bool = False) -> tuple[list[MeasuredRecord], dict]:
     """The measured thermal gyro records under a shared-data folder.
 
     Folders holding ``*.csv`` records are read as records; a ``*bmi270*`` folder holds Bosch
@@ -74,6 +88,9 @@ def load_records(data_dir: str | Path) -> tuple[list[MeasuredRecord], dict]:
     ----------
     data_dir : path-like
         E.g. ``../shared/data`` or ``tests/data``.
+    independent : bool
+        Also read ``independent-dev``: records of this device simulated by an independent
+        generator (auxiliary channels, known true rate, its own temperature laws and effects).
 
     Returns
     -------
@@ -85,6 +102,14 @@ def load_records(data_dir: str | Path) -> tuple[list[MeasuredRecord], dict]:
         raise InputError("no such folder", str(root))
     out, skipped = [], {}
     for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        if folder.name == "independent-dev" and independent:
+            for f in sorted(folder.glob("*.csv.gz")):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    rec = _read_gz_record(f)
+                stem = f.name[:-len(".csv.gz")]
+                out.append(MeasuredRecord(f"{folder.name}/{stem}", f"{folder.name}/{stem}", rec))
+            continue
         if folder.name in NOT_THERMAL:
             skipped[folder.name] = NOT_THERMAL[folder.name]
             continue
@@ -242,6 +267,7 @@ def evaluate_case(case: Case, methods=METHODS, method_params: dict | None = None
         sel = comp.selection_report()
         case.results[m] = {"rms_dps": r, "ratio": r / b, "chosen": sel["chosen"] if sel else None,
                            "continuation": (sel.get("chosen_settings") or {}).get("continuation") if sel else None,
+                           "held": (sel.get("chosen_settings") or {}).get("held") if sel else None,
                            "extrapolated": ex.get("summary") if ex.get("any") else None,
                            "wall_s": time.perf_counter() - t0}
     return case
@@ -302,7 +328,10 @@ def markdown(cases: list[Case], methods=METHODS) -> str:
         d, line = c.results.get(DEFAULT_METHOD, {}), c.results.get("line", {})
         vs = (f"{d['rms_dps'] / line['rms_dps']:.3f}" + (" (line wins)" if line["rms_dps"] < d["rms_dps"] else "")
               if "rms_dps" in d and "rms_dps" in line else "")
-        cont = f", {d['continuation']}" if d.get("continuation") and d.get("extrapolated") else ""
+        cont = ""
+        if d.get("extrapolated"):
+            held = d.get("held") or []
+            cont = f", {d['continuation']}" + (f" (held in {', '.join(held)})" if held else "")
         cells += [f"{c.references['floor_ratio']:.3f}", f"{c.references['bias_rms_dps']:.4g}",
                   (d.get("chosen") or "") + cont, vs]
         lines.append("| " + " | ".join(cells) + " |")
