@@ -1,7 +1,8 @@
 """The wiring of paper 000's Figure 3 (blocks 1-14) from the block library.
 
-``build_diagram(device, T)`` instantiates every block with its parameters at the
-temperature ``T`` and knows how they connect. Both engines and the tuning tools use
+``build_diagram(device, T, board_C=Tb)`` instantiates every block with its parameters at the
+die temperature ``T`` (MEMS) and the board temperature ``Tb`` (electronics, default ``T``) and
+knows how they connect. Both engines and the tuning tools use
 it: the carrier engine discretises :meth:`Diagram.core_system` exactly and runs the
 nonlinear blocks' carrier faces; the averaged model (:mod:`fmvmg_sim.averaged`) uses
 the blocks' frequency responses and describing functions.
@@ -35,6 +36,10 @@ from .device import Device, OperatingPoint
 CORE_INPUTS = ("F_x_ext", "F_y_ext", "n_drive", "n_sense")
 #: Outputs of the linear core, in order.
 CORE_OUTPUTS = ("v_x", "v_ps", "v_s", "x", "y", "v_ac")
+#: Floor of the carrier normaliser's amplitude detector, as a fraction of the phase-shifted pickoff's
+#: amplitude at the set-point: below it the 'normalized' carrier shrinks with the pickoff instead of
+#: amplifying noise (both engines apply it).
+NORMALISER_FLOOR_REL = 0.1
 
 
 @dataclass
@@ -82,8 +87,14 @@ class Diagram:
 
     @property
     def temperature_C(self) -> float:
-        """Temperature of this operating point."""
+        """Die temperature of this operating point."""
         return self.op.temperature_C
+
+    @property
+    def board_temperature_C(self) -> float:
+        """Board temperature of this operating point (the die's when not given apart)."""
+        b = self.op.board_temperature_C
+        return self.op.temperature_C if b is None else b
 
     @property
     def omega_drive_rad_s(self) -> float:
@@ -165,6 +176,18 @@ class Diagram:
         off[2] = self.sense_amp1.offset_V * self.sense_amp2.gain + self.sense_amp2.offset_V
         return off
 
+    def normaliser_floor_V(self) -> float:
+        """Floor of the carrier normaliser ``n = Vdac / max(sqrt(v_x^2 + v_ps^2), floor)`` (V).
+
+        :data:`NORMALISER_FLOOR_REL` of the phase-shifted pickoff's amplitude at the set-point
+        (the amplitude the rectifier and low-pass read as Vref).
+
+        Returns
+        -------
+        float
+        """
+        return NORMALISER_FLOOR_REL * (self.vref_V - self.rectifier.offset_V) / self.rectifier.describing_gain()
+
     # --- envelope faces of the chains -------------------------------------------------
     def drive_chain_response(self, omega_rad_s: float) -> complex:
         """v_x per metre of drive displacement at ``omega_rad_s`` (pickoff and amplifier 1).
@@ -236,21 +259,25 @@ def design_phase_trim(device: Device) -> float:
     return _trim_for(device)
 
 
-def build_diagram(device: Device, temperature_C: float, quad_delta_rel: float = 0.0) -> Diagram:
-    """All blocks of ``device`` at ``temperature_C``.
+def build_diagram(device: Device, temperature_C: float, quad_delta_rel: float = 0.0,
+                  board_C: float | None = None) -> Diagram:
+    """All blocks of ``device`` at the die temperature ``temperature_C`` and the board temperature ``board_C``.
 
     Parameters
     ----------
     device : Device
     temperature_C : float
+        Die temperature (the MEMS laws).
     quad_delta_rel : float, optional
         Relative change of the quadrature stiffness (hysteresis, stress relaxation).
+    board_C : float, optional
+        Board temperature (the electronics laws); default: the die temperature.
 
     Returns
     -------
     Diagram
     """
-    op = device.at(temperature_C)
+    op = device.at(temperature_C, board_C)
     if quad_delta_rel:
         op.values["mechanics"]["k_quad_N_per_m"] *= 1.0 + quad_delta_rel
     # the reference phase is trimmed once, at the reference temperature; its drift follows the board

@@ -69,7 +69,7 @@ def test_a_record_whose_only_ramp_comes_after_the_training_window(tmp_path):
     # rate output, and advises moving or repeating the ramp; it attributes nothing to it
     from fmvmg_sim.diagnosis.pipeline import diagnose
     from fmvmg_sim.diagnosis.report import markdown
-    from tests.test_diagnosis_cases import THETA
+    from tests.test_validation_cases import THETA
     from tests.test_diagnosis_helpers import LATE_RAMP, NOMINAL, oven_record
     late = LATE_RAMP
     rec, _ = oven_record(tmp_path, "late", {"temperature_rate": {"g_dph_per_K_per_min": 600.0}}, seed=21,
