@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -238,6 +239,17 @@ class Device:
         dp = ci["drive_pickoff"]
         k_dx = dp["bias_V"] * dp["dC_dx_F_per_m"] / dp["c_feedback_F"] * abs(ci["drive_amp"]["gain"])
         return (np.pi / 2) * ci["reference"]["vref_V"] / (ci["rectifier"]["gain"] * k_dx)
+
+    @cached_property
+    def drive_frequency_tc_Hz_per_K(self) -> float:
+        """Slope of the drive resonance with die temperature at the reference temperature, in Hz/K.
+
+        The central difference of :meth:`at` over +-0.5 K (the drive mode's stiffness and mass laws,
+        both on the die); computed once per device. A drive frequency read from a record becomes a
+        die temperature change with it.
+        """
+        T = self.reference_temperature_C
+        return float(self.at(T + 0.5)["mechanics"]["f_drive_Hz"] - self.at(T - 0.5)["mechanics"]["f_drive_Hz"])
 
     def _k3_from_rel(self) -> float:
         rel = self.values["mechanics"].get("duffing_k3_rel", 0.0)

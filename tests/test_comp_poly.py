@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
+from sklearn.utils.validation import check_is_fitted
 
+from fmvmg_sim import api
 from fmvmg_sim.compensation import get_method
 from fmvmg_sim.compensation.poly import BiasOnly, LineInT, PolyBaseline, check_record
 from fmvmg_sim.compensation.synthetic import DriftParams, make_record
@@ -31,7 +33,7 @@ def test_recovers_thermal_coefficients_and_generalises():
     if chosen["order"] == 2:
         assert c["dT^2"] == pytest.approx(0.02, rel=0.1)          # a2
         assert c["dT"] == pytest.approx(2.0 + 2 * 0.02 * dT_ref, rel=0.05)  # a1 about T_ref
-    err = comp.transform(test) - test["rate_true_dps"]
+    err = comp.compensate_rate_dps(test) - test["rate_true_dps"]
     raw = test["rate_dps"] - test["rate_true_dps"]
     assert rms(err) < 0.1 * rms(raw)
 
@@ -56,7 +58,7 @@ def test_no_thermal_law_selects_a_constant():
     test = make_record(3600, 10, "cooling", "static", seed=5, params=p)
     poly = PolyBaseline().fit(train)
     bias = BiasOnly().fit(train)
-    assert rms(poly.transform(test)) <= 1.01 * rms(bias.transform(test))
+    assert rms(poly.compensate_rate_dps(test)) <= 1.01 * rms(bias.compensate_rate_dps(test))
 
 
 def test_tangent_beyond_the_training_range():
@@ -68,7 +70,7 @@ def test_tangent_beyond_the_training_range():
     m = PolyBaseline(orders=(2,), dtdt_smoothing_s=(None,), continuation="tangent").fit(train)
     T2 = np.full(t.size, 45.0)
     test = Record({"time_s": t, "temperature_C": T2, "rate_dps": np.zeros(t.size)})
-    drift = -m.transform(test)
+    drift = -m.compensate_rate_dps(test)
     # value and slope of 0.001 (T-25)^2 at 35 C: 0.1 and 0.02 per K -> 0.3 at 45 C (the parabola gives 0.4)
     assert drift.mean() == pytest.approx(0.1 + 0.02 * 10, rel=0.01)
     ex = m.transform_diagnostics_["extrapolation"]
@@ -93,7 +95,7 @@ def test_handles_gaps_and_refuses_them_where_needed():
     gappy = rec.slice(keep)
     comp = get_method("poly-baseline")()
     assert comp.handles_gaps
-    out = comp.fit(gappy).transform(gappy)
+    out = comp.fit(gappy).compensate_rate_dps(gappy)
     assert out.shape == (len(gappy),) and np.all(np.isfinite(out))
     with pytest.raises(InputError, match="uneven steps"):
         check_record(gappy, need_uniform=True, method="emd-rbf")
@@ -120,18 +122,43 @@ def test_missing_rows_become_gaps():
     rec.columns["temperature_C"] = rec["temperature_C"].copy()
     rec.columns["temperature_C"][5] = np.nan
     m = get_method("poly-baseline")().fit(rec)
-    out = m.transform(rec)
+    out = m.compensate_rate_dps(rec)
     assert np.isnan(out[5]) and np.isfinite(np.delete(out, 5)).all()
     assert any("data row 6" in n for n in m.diagnostics_["notes"])
     with pytest.raises(InputError, match="temperature_C has 1 missing"):
         check_record(rec, need_uniform=True, method="emd-rbf")
 
 
-@pytest.mark.parametrize("name", ["poly-baseline", "line", "bias", "physics", "emd-rbf", "vmd-wflp-cssvr"])
-def test_estimator_contract(name):
-    cls = get_method(name)
-    comp = cls()
+@pytest.mark.parametrize("name", api.compensators())
+def test_unfitted_compensator_raises_not_fitted(name):
+    """Every registered method: clone round-trips, and before fit scikit-learn's NotFittedError, not AttributeError."""
+    comp = get_method(name)()
     assert clone(comp).get_params() == comp.get_params()
     rec = make_record(600, 10, "heating", "static", seed=9)
     with pytest.raises(NotFittedError):
-        comp.transform(rec)
+        check_is_fitted(comp)
+    for call in (comp.transform, comp.compensate_rate_dps):
+        with pytest.raises(NotFittedError):
+            call(rec)
+    with pytest.raises(NotFittedError):
+        comp.selection_report()
+
+
+@pytest.mark.parametrize("name", ["poly-baseline", "line", "bias", "physics"])
+def test_transform_returns_the_compensated_record(name):
+    """transform gives a record: rate_dps compensated, the input's in rate_raw_dps, every other channel copied."""
+    rec = make_record(600, 10, "heating", "static", seed=9)
+    rec.metadata["device"] = "fmvmg-a"
+    comp = get_method(name)().fit(rec)
+    check_is_fitted(comp)
+    out = comp.transform(rec)
+    assert isinstance(out, Record) and len(out) == len(rec)
+    np.testing.assert_array_equal(out["rate_dps"], comp.compensate_rate_dps(rec))
+    np.testing.assert_array_equal(out["rate_raw_dps"], rec["rate_dps"])
+    for c in rec.columns:
+        if c != "rate_dps":
+            np.testing.assert_array_equal(out[c], rec[c])
+    assert out.metadata == {**rec.metadata, "compensation_method": name}
+    assert "rate_raw_dps" not in rec  # the input is left alone
+    assert np.std(out["rate_dps"]) < np.std(rec["rate_dps"]) or name == "bias"
+    np.testing.assert_allclose(get_method(name)().fit_transform(rec)["rate_dps"], out["rate_dps"])

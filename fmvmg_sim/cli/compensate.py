@@ -180,19 +180,12 @@ def run(args) -> int:
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        if args.train:
-            comp.fit(train)
-            out = comp.transform(record)
-        else:
-            out = comp.fit_transform(record)
+        compensated = comp.fit(train).transform(record) if args.train else comp.fit_transform(record)
     wall = time.perf_counter() - t0
-    cols = dict(record.columns)
-    cols["rate_raw_dps"] = record["rate_dps"]
-    cols["rate_dps"] = np.asarray(out, float)
-    meta = dict(record.metadata)
-    meta.update({"compensation_method": args.method, "in_sample": str(not args.train).lower(),
-                 "trained_on": str(args.train or args.record), "source_record": str(args.record)})
-    write_record(staged.path / "compensated.csv", Record(cols, meta))
+    out = compensated["rate_dps"]
+    compensated.metadata.update({"in_sample": str(not args.train).lower(),
+                                 "trained_on": str(args.train or args.record), "source_record": str(args.record)})
+    write_record(staged.path / "compensated.csv", compensated)
     blocks = _report_blocks(comp)
     blocks["notes"] = list(dict.fromkeys([str(w.message) for w in caught] + blocks["notes"]))
     if args.train:

@@ -119,7 +119,7 @@ def compare(method: str, out: np.ndarray, train: Record, record: Record) -> dict
             continue
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            rms[ref] = rms_dps(record, get_method(ref)().fit(train).transform(record))
+            rms[ref] = rms_dps(record, get_method(ref)().fit(train).compensate_rate_dps(record))
     floor = white_noise_floor_dps(record)
     b = rms.get("bias")
     rel = {k: (v / b if b else None) for k, v in rms.items()}

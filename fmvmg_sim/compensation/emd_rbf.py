@@ -233,7 +233,7 @@ class EMDRBF(Compensator):
         self.fit_diagnostics_ = diag
         return self
 
-    def transform(self, record: Record, _decomp=None) -> np.ndarray:
+    def compensate_rate_dps(self, record: Record, _decomp=None) -> np.ndarray:
         """Compensated rate in deg/s (noise group dropped, mixed denoised, drift compensated).
 
         Parameters
@@ -264,7 +264,7 @@ class EMDRBF(Compensator):
         self.transform_diagnostics_ = diag
         return mixed + drift
 
-    def fit_transform(self, record: Record) -> np.ndarray:
+    def _fit_compensate_rate_dps(self, record: Record) -> np.ndarray:
         """Fit and compensate the same record (in-sample); decomposes once when no truth is known.
 
         Parameters
@@ -280,7 +280,7 @@ class EMDRBF(Compensator):
         e = rate_error(record)
         dec = self._decompose(record.time_s, e, fs) if np.array_equal(e, record["rate_dps"]) else None
         self.fit(record, _decomp=None if dec is None else (dec[0], dict(dec[1])))
-        return self.transform(record, _decomp=None if dec is None else (dec[0], dict(dec[1])))
+        return self.compensate_rate_dps(record, _decomp=None if dec is None else (dec[0], dict(dec[1])))
 
 
 @register("emd-rbf-ga")

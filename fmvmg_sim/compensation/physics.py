@@ -10,9 +10,8 @@ itself rather than by a thermometer glued to the case:
 
 * ``quadrature_V``: the quadrature amplitude Q that leaks;
 * ``drive_frequency_Hz``: the drive resonance moves with the die temperature (its slope
-  comes from the device file named in the record's ``# device:`` line, evaluated by
-  :meth:`fmvmg_sim.device.Device.at`: about -0.92 Hz/K for config A, -0.29 Hz/K for config
-  B), so it is the die's own thermometer and follows the die through any case-to-die lag;
+  comes from the device file named in the record's ``# device:`` line,
+  :attr:`fmvmg_sim.device.Device.drive_frequency_tc_Hz_per_K`), so it is the die's own thermometer and follows the die through any case-to-die lag;
 * ``agc_effort_V``: the drive-amplitude control effort, proportional to the drive damping.
 
 Model and its selection
@@ -115,24 +114,6 @@ def find_device(name: str) -> Device | None:
     return None
 
 
-def drive_frequency_tc_Hz_per_K(device: Device, temperature_C: float | None = None) -> float:
-    """Slope of the drive resonance with die temperature, from the device's temperature laws.
-
-    Parameters
-    ----------
-    device : Device
-    temperature_C : float, optional
-        Where the slope is taken (default: the device's reference temperature).
-
-    Returns
-    -------
-    float
-        Hz/K (central difference of :meth:`Device.at` over +-0.5 K).
-    """
-    T = device.reference_temperature_C if temperature_C is None else float(temperature_C)
-    return float(device.at(T + 0.5)["mechanics"]["f_drive_Hz"] - device.at(T - 0.5)["mechanics"]["f_drive_Hz"])
-
-
 @register("physics")
 class PhysicsCompensator(Compensator):
     """Least-squares drift model on quadrature, die temperature (drive frequency) and AGC effort.
@@ -220,7 +201,7 @@ class PhysicsCompensator(Compensator):
         name = self.device or record.metadata.get("device")
         dev = find_device(name) if name else None
         if dev is not None:
-            return drive_frequency_tc_Hz_per_K(dev), f"device file {dev.name!r} (Device.at)"
+            return dev.drive_frequency_tc_Hz_per_K, f"device file {dev.name!r} (Device.drive_frequency_tc_Hz_per_K)"
         Tb, fb = bins.mean(record["temperature_C"]), bins.mean(record["drive_frequency_Hz"])
         if np.ptp(Tb) > 1.0:
             slope = float(np.polyfit(Tb - Tb.mean(), fb, 1)[0])
@@ -328,7 +309,7 @@ class PhysicsCompensator(Compensator):
             "notes": notes + sel.notes}
         return self
 
-    def transform(self, record: Record) -> np.ndarray:
+    def compensate_rate_dps(self, record: Record) -> np.ndarray:
         """Rate with the predicted drift subtracted (signal path untouched), in deg/s.
 
         Parameters

@@ -155,7 +155,7 @@ class _TemperatureCompensator(Compensator):
                              "notes": self.model_.selection_.notes + ([note] if note else [])}
         return self
 
-    def transform(self, record: Record) -> np.ndarray:
+    def compensate_rate_dps(self, record: Record) -> np.ndarray:
         """Rate with the fitted temperature model subtracted, in deg/s.
 
         Parameters

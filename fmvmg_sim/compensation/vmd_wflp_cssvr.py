@@ -195,7 +195,7 @@ class VMDWFLPCSSVR(Compensator):
                                       "n_samples_full_rate": len(record)})
         return self
 
-    def transform(self, record: Record) -> np.ndarray:
+    def compensate_rate_dps(self, record: Record) -> np.ndarray:
         """Compensated rate in deg/s at the record's own rate -- see :meth:`_transform_native`.
 
         Parameters

@@ -446,12 +446,12 @@ def _apply(method: str, train: Record, test: Record, seed: int, params: dict | N
         if shared:
             try:
                 comp.fit(train, _decomp=decomp.get(comp, train, "error"))
-                out = np.asarray(comp.transform(test, _decomp=decomp.get(comp, test, "rate")), dtype=float)
+                out = np.asarray(comp.compensate_rate_dps(test, _decomp=decomp.get(comp, test, "rate")), dtype=float)
                 return out, comp, time.perf_counter() - t0
             except TypeError:
                 comp = _make(method, seed, params)
         comp.fit(train)
-        out = np.asarray(comp.transform(test), dtype=float)
+        out = np.asarray(comp.compensate_rate_dps(test), dtype=float)
     return out, comp, time.perf_counter() - t0
 
 
@@ -590,7 +590,7 @@ def evaluate(methods=ALL_METHODS, seeds: int = 5, quick: bool = False, effects: 
                         entry["diagnostics"] = run_diagnostics(comp)
                     if in_sample:
                         out_in = (np.asarray(train["rate_dps"], float) if comp is None
-                                           else np.asarray(comp.transform(train), float))
+                                           else np.asarray(comp.compensate_rate_dps(train), float))
                         a_in = allan_figures(out_in, 1.0 / train.sample_interval_s(), tf)
                         entry["in_sample"] = {k: a_in[k] for k in ("N_paper_dph_rtHz", "N_paper_deg_rt_h",
                                                                    "B_paper_dph")}

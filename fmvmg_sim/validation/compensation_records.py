@@ -244,7 +244,7 @@ def evaluate_case(case: Case, methods=METHODS, method_params: dict | None = None
     """
     test_ok, _, _ = complete_rows(case.test)
     bias = get_method("bias")().fit(case.train)
-    b = rms_dps(case.test, bias.transform(case.test))
+    b = rms_dps(case.test, bias.compensate_rate_dps(case.test))
     floor = white_noise_floor_dps(test_ok)
     case.references = {"bias_rms_dps": b, "floor_rms_dps": floor, "floor_ratio": floor / b}
     for m in methods:
@@ -257,7 +257,7 @@ def evaluate_case(case: Case, methods=METHODS, method_params: dict | None = None
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 comp = cls(**kw).fit(case.train)
-                out = comp.transform(case.test)
+                out = comp.compensate_rate_dps(case.test)
         except InputError as exc:
             case.results[m] = {"refused": exc.message}
             continue
