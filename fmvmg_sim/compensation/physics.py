@@ -16,32 +16,39 @@ itself rather than by a thermometer glued to the case:
 
 Model and its selection
 -----------------------
-With dT_die the die temperature change read from the drive frequency, the candidate models
-are least squares on 1 s bin means of the training error of
+The MEMS element's laws (resonances, quadrature, damping) follow the die; the electronics
+(amplifier bandwidths, phase shifter, reference, rectifier) sit on the board, at the case
+temperature that ``temperature_C`` reads. With dT_die the die temperature change read from the
+drive frequency and dT_case the change of ``temperature_C``, the candidate models are least
+squares on 1 s bin means of the training error of
 
     rate_err = c0 + c3 dT_die [+ c4 dT_die^2] [+ c1 Q [+ c2 Q dT_die]] [+ c5 A_agc]
+               [+ c6 dT_case [+ c7 dT_case^2]]
 
 (c1, c2: the leak through a phase expanded to first order in temperature; c3, c4: the other
-temperature laws on the die's thermometer; c5: the damping term), each with the auxiliary
-channels smoothed over one of ``smoothing_s`` (their own noise must not reach the output),
-beside the temperature models of :mod:`.thermal_model` on ``temperature_C``. Which one is used
-is chosen by forward-chained validation on the training record (:mod:`.selection`, the
-simplest within one standard error of the best): on a record whose auxiliary channels carry
-nothing the temperature does not, a temperature model wins and the report says so. The AGC
-term is left out beforehand when the die temperature explains the AGC effort to
-R^2 > 1 - :data:`AGC_COLLINEAR_TOL` (collinear columns make the coefficients swing).
+temperature laws on the die's thermometer; c5: the damping term; c6, c7: the electronics' laws
+on the case), each with the auxiliary channels smoothed over one of ``smoothing_s`` (their own
+noise must not reach the output), beside the temperature models of :mod:`.thermal_model` on
+``temperature_C``. Which one is used is chosen by forward-chained validation on the training
+record (:mod:`.selection`): on a record whose auxiliary channels carry nothing the temperature
+does not, a temperature model wins and the report says so. The AGC term is left out beforehand
+when the die temperature explains the AGC effort to R^2 > 1 - :data:`AGC_COLLINEAR_TOL`
+(collinear columns make the coefficients swing). Without the drive frequency the die and case
+temperatures are the same reading and the case terms are not offered.
 
 How it is applied
 -----------------
 The regressors are computed on 1 s bins of the record (inside the stretches between gaps),
 the predicted drift is interpolated back to the samples and *subtracted* from ``rate_dps``.
 The signal path is not filtered (``filter_time_constant_s`` = 0 in the diagnostics; the
-correction's own smoothing is ``correction_smoothing_s``). Beyond the box of regressor values
-seen in training the model is continued from the box's edge along the die temperature only
-(with the slope of a line in it fitted on the whole training range, when that slope is
-significant); the quadrature and the AGC effort are held at their edge, since they follow the
-die temperature and their own slope, fitted beside it on collinear data, is not a forecast. The
-transform diagnostics say which channels left the box and by how much.
+correction's own smoothing is ``correction_smoothing_s``). The regressors all follow the
+temperature, so in training they are nearly collinear: their coefficients are pinned down along
+the data and not across it. Beyond the range seen in training the model is therefore evaluated
+at the training point nearest in all its regressors (a combination the data fixed, not a
+clamped corner of the box) and continued from there along its tangent plane, when the drift's
+slope along the regressors' principal direction is reproducible over the record's time blocks
+(:func:`.selection.principal_slope_significance`); otherwise it is held there. The transform
+diagnostics say which channels left the range and by how much.
 
 Fallback
 --------
@@ -77,11 +84,8 @@ AGC_COLLINEAR_TOL = 1e-3
 #: Smoothing spans of the auxiliary channels offered by default, in s.
 SMOOTHING_S = (10.0, 30.0, 120.0)
 #: Base variables of the auxiliary models and their units.
-AUX_VARS = ["Q", "dT_die", "A_agc"]
-AUX_UNITS = {"Q": "V", "dT_die": "K", "A_agc": "V", **UNITS}
-#: Auxiliary variables held at the edge of their training range rather than extrapolated: they
-#: follow the die temperature, and a slope fitted beside it on collinear data is not a forecast.
-NOT_EXTRAPOLATED = ("Q", "A_agc")
+AUX_VARS = ["Q", "dT_die", "A_agc", "dT_case"]
+AUX_UNITS = {"Q": "V", "dT_die": "K", "A_agc": "V", "dT_case": "K", **UNITS}
 
 
 class PhysicsFallbackWarning(UserWarning):
@@ -138,13 +142,16 @@ class PhysicsCompensator(Compensator):
         Forward-chained validation folds.
     min_train_fraction : float, optional
         Fraction of the training record the first fold is fitted on.
+    case_orders : tuple of int, optional
+        Orders of the case-temperature (electronics) terms to choose from (0: none).
     """
 
     handles_gaps = True
 
     def __init__(self, smoothing_s=SMOOTHING_S, use_agc="auto", temperature_models=True, device=None,
-                 rule="best", n_folds=4, min_train_fraction=0.5):
+                 rule="best", n_folds=4, min_train_fraction=0.5, case_orders=(0, 1, 2)):
         self.smoothing_s, self.use_agc, self.temperature_models = smoothing_s, use_agc, temperature_models
+        self.case_orders = case_orders
         self.device, self.rule, self.n_folds, self.min_train_fraction = device, rule, n_folds, min_train_fraction
 
     # -- regressors ----------------------------------------------------------------------------
@@ -153,17 +160,18 @@ class PhysicsCompensator(Compensator):
         return {c: record.has(c) and bool(np.isfinite(record[c]).all()) for c in AUX_CHANNELS}
 
     def _aux_base(self, record: Record, bins: Bins, span: float) -> np.ndarray:
-        """[Q, dT_die, A_agc] per bin (columns of missing channels are zeros)."""
+        """[Q, dT_die, A_agc, dT_case] per bin (columns of missing channels are zeros)."""
         def sm(c):
             return smooth_within(bins, bins.mean(record[c]), span)
+        dTc = sm("temperature_C") - self.T_ref_C_
         if self.die_source_ == "drive_frequency_Hz":
             dTd = (sm("drive_frequency_Hz") - self.f_ref_Hz_) / self.kf_Hz_per_K_
         else:
-            dTd = sm("temperature_C") - self.T_ref_C_
+            dTd = dTc
         z = np.zeros(len(bins))
         q = sm("quadrature_V") - self.q_ref_V_ if "quadrature_V" in self.channels_ else z
         a = sm("agc_effort_V") - self.a_ref_V_ if "agc_effort_V" in self.channels_ else z
-        return np.column_stack([q, dTd, a])
+        return np.column_stack([q, dTd, a, dTc])
 
     def _base(self, record: Record, bins: Bins, key) -> np.ndarray:
         kind, span = key
@@ -173,19 +181,25 @@ class PhysicsCompensator(Compensator):
 
     def _aux_candidates(self) -> list[Candidate]:
         has_q, has_a = "quadrature_V" in self.channels_, "agc_effort_V" in self.channels_
+        # the case temperature is a second thermometer only when the die's is the drive frequency
+        case_orders = tuple(self.case_orders) if self.die_source_ == "drive_frequency_Hz" else (0,)
         out = []
         for span in self.smoothing_s:
             for die in (1, 2):
                 for nq in ((0, 1, 2) if has_q else (0,)):
                     for na in ((0, 1) if has_a else (0,)):
-                        e = [(0, k, 0) for k in range(1, die + 1)]
-                        e += [(1, 0, 0), (1, 1, 0)][:nq] + [(0, 0, 1)][:na]
-                        name = " + ".join(["dT_die" if die == 1 else "dT_die, dT_die^2"]
-                                          + ["Q", "Q, Q*dT_die"][nq - 1:nq] + ["A_agc"][:na])
-                        out.append(Candidate(f"{name} ({span:g} s)", ("aux", span), AUX_VARS, e,
-                                             {"die_order": die, "quadrature_terms": nq, "agc_term": bool(na),
-                                              "smoothing_s": span, "held": list(NOT_EXTRAPOLATED),
-                                              "anchor": True, "continuation": "tangent"}))
+                        for nc in case_orders:
+                            e = [(0, k, 0, 0) for k in range(1, die + 1)]
+                            e += [(1, 0, 0, 0), (1, 1, 0, 0)][:nq] + [(0, 0, 1, 0)][:na]
+                            e += [(0, 0, 0, k) for k in range(1, nc + 1)]
+                            name = " + ".join(["dT_die" if die == 1 else "dT_die, dT_die^2"]
+                                              + ["Q", "Q, Q*dT_die"][nq - 1:nq] + ["A_agc"][:na]
+                                              + ["dT_case", "dT_case, dT_case^2"][nc - 1:nc])
+                            out.append(Candidate(f"{name} ({span:g} s)", ("aux", span), AUX_VARS, e,
+                                                 {"die_order": die, "quadrature_terms": nq, "agc_term": bool(na),
+                                                  "case_order": nc, "smoothing_s": span, "held": [],
+                                                  "anchor": True, "continuation": "tangent",
+                                                  "slope_test": "joint"}))
         return out
 
     def _agc_r2(self, record: Record, bins: Bins) -> float:
@@ -341,8 +355,7 @@ class PhysicsCompensator(Compensator):
         if off.any():
             ex["off_training_data_fraction"] = float(bins.counts[off].sum() / bins.counts.sum())
             ex["summary"] += (f"; there ({100 * ex['off_training_data_fraction']:.0f} % of the record) the model takes "
-                              "its value at the training point nearest in die temperature, continued along the die "
-                              "temperature")
+                              "its value at the training point nearest in its regressors, continued from there")
         self.transform_diagnostics_ = {"extrapolation": ex, "sampling": describe(record.time_s),
                                        "filter_time_constant_s": 0.0, "notes": [gap_note] if gap_note else []}
         out = np.full(len(full), np.nan)

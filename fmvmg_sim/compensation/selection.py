@@ -517,6 +517,41 @@ def slope_significance(X: np.ndarray, y: np.ndarray, w: np.ndarray, blocks: list
     return out
 
 
+def principal_slope_significance(X: np.ndarray, y: np.ndarray, w: np.ndarray, blocks: list[np.ndarray]) -> dict:
+    """Whether the drift's slope along the principal direction of collinear variables is reproducible.
+
+    Variables that all follow one cause (a die temperature, a case temperature and a quadrature
+    that all follow the oven) have individual slopes the blocks cannot pin down while their
+    joint slope along the data is sharp. The variables are standardised, projected on their first
+    principal component (weighted by ``w``), and :func:`slope_significance` tests the slope on
+    that projection.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, n_vars)
+    y, w : ndarray
+        Target and weights per bin.
+    blocks : list of ndarray
+        From :func:`time_blocks`.
+
+    Returns
+    -------
+    dict
+        As one variable of :func:`slope_significance`, with ``direction`` (the component's
+        loadings on the standardised variables) and ``explained_variance_ratio``.
+    """
+    sw = w / w.sum()
+    mu = sw @ X
+    sd = np.sqrt(sw @ (X - mu) ** 2)
+    Z = (X - mu) / np.where(sd > 0, sd, 1.0)
+    _, sv, vt = np.linalg.svd(Z * np.sqrt(sw)[:, None], full_matrices=False)
+    u = vt[0] * np.sign(vt[0][np.argmax(np.abs(vt[0]))])
+    out = slope_significance((Z @ u)[:, None], y, w, blocks, ["pc1"])["pc1"]
+    out.update({"direction": [float(v) for v in u],
+                "explained_variance_ratio": float(sv[0] ** 2 / np.sum(sv ** 2)) if np.sum(sv ** 2) > 0 else 1.0})
+    return out
+
+
 @dataclass
 class Candidate:
     """One structure to score.
@@ -720,6 +755,16 @@ def _set_continuation(c: Candidate, X: np.ndarray, y, w, blocks, continuation: s
         c.settings.update({"continuation": continuation, "held": fixed})
         return
     names = [c.var_names[j] for j in used]
+    if c.settings.get("slope_test") == "joint" and blocks is not None and used:
+        sig = {"principal direction": principal_slope_significance(X[:, used], y, w, blocks)}
+        held = [] if sig["principal direction"]["significant"] else list(names)
+        c.settings.update({"continuation": c.settings.get("continuation", "slope"), "held": fixed + held,
+                           "slope_significance": sig})
+        v = sig["principal direction"]
+        notes.append("beyond the training range " + ("continued along the tangent plane" if not held else "held constant")
+                     + " (joint slope test along the principal direction of " + ", ".join(names) + ": t = "
+                     + ("n/a" if v["t"] is None else f"{v['t']:.2g}") + ")")
+        return
     sig = slope_significance(X[:, used], y, w, blocks, names) if blocks is not None and used else {}
     held = [n for n, v in sig.items() if not v["significant"]]
     c.settings.update({"continuation": c.settings.get("continuation", "slope"), "held": fixed + held,

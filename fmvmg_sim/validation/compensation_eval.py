@@ -784,6 +784,41 @@ def markdown_table(ev: Evaluation) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: The papers' own figures of their methods, read their way (paper 000 Table 2: N in deg/h/sqrt(Hz), B in
+#: deg/h; paper 004: ARW in deg/sqrt(h), B in deg/h), by the project's method name.
+PAPER_FIGURES = {
+    "paper 000, Table 2": ("N", {RAW: (99.608, 34.66), "emd-rbf": (99.6037, 28.42), "emd-rbf-ga": (99.6011, 23.65),
+                                 "emd-rbf-ga-kf": (0.967814, 3.589)}),
+    "paper 004": ("ARW", {RAW: (1.667, 30.0), "vmd-wflp-cssvr": (0.0667, 4.0)}),
+}
+
+
+def papers_table(ev: Evaluation) -> str:
+    """The papers' figures beside ours read the papers' way, as Markdown.
+
+    Parameters
+    ----------
+    ev : Evaluation
+
+    Returns
+    -------
+    str
+    """
+    S = ev.summary
+    lines = ["| | paper's own | ours, paper's way (held-out, mean ± SD) | slope of the Allan curve at τ = 1 s (ours) |",
+             "|---|---|---|---|"]
+    for paper, (kind, rows) in PAPER_FIGURES.items():
+        unit = "N in deg/h/√Hz" if kind == "N" else "ARW in deg/√h"
+        lines.append(f"| **{paper}** ({unit}, B in deg/h) | | | |")
+        for m, (n, b) in rows.items():
+            if m not in S:
+                continue
+            key = "N_paper_dph_rtHz" if kind == "N" else "N_paper_deg_rt_h"
+            lines.append(f"| `{m}` | {kind} {n:g}, B {b:g} | {kind} {_fmt(S[m][key])}, B {_fmt(S[m]['B_paper_dph'])} | "
+                         f"{_fmt(S[m]['slope_at_1s'], '+.2f')} |")
+    return "\n".join(lines) + "\n"
+
+
 def plot_allan(ev: Evaluation, path, direction: str | None = None) -> None:
     """Allan curves before (raw) and after each method on the first seed's held-out run.
 

@@ -356,3 +356,38 @@ def to_dict(cases: list[Case], skipped: dict) -> dict:
     return {"skipped": skipped, "cases": [{"record": c.record, "direction": c.direction, **c.describe(),
                                            "references": c.references, "results": c.results,
                                            "target": target_check(c)} for c in cases]}
+
+
+def report(cases: list[Case], skipped: dict, methods=METHODS) -> str:
+    """The whole measured-records block of the documentation: table, refusals, target check.
+
+    Parameters
+    ----------
+    cases : list of Case
+        Evaluated cases.
+    skipped : dict
+        Folders left out, with the reason.
+    methods : sequence of str
+
+    Returns
+    -------
+    str
+        Markdown (no timings: the same data give the same text).
+    """
+    checks = [(c, target_check(c)) for c in cases]
+    ok = [(c, t) for c, t in checks if t["ok"] is not None]
+    lines = [markdown(cases, methods).rstrip("\n"), ""]
+    lines.append(f"The default method (`{DEFAULT_METHOD}`) is within 1.05 x the better of a line in T and the "
+                 f"selected polynomial on {sum(t['ok'] for _, t in ok)} of {len(ok)} train/test pairs"
+                 + (f" (worst ratio {max(t['ratio'] for _, t in ok):.3f})" if ok else "") + ".")
+    wins = [(c, t) for c, t in ok if t["winner"] == "line"]
+    if wins:
+        lines.append(f"The line in T has the lower held-out RMS on {len(wins)} of them: "
+                     + "; ".join(f"{c.record}, {c.direction} (the default {t['ratio']:.3f} x the line)"
+                                 for c, t in wins) + ".")
+    else:
+        lines.append("The line in T never has the lower held-out RMS.")
+    for k, why in skipped.items():
+        lines.append(f"`{k}` is left out: {why}.")
+    return "\n".join(lines) + "\n"
+
