@@ -42,6 +42,8 @@ def test_beats_poly_baseline_held_out_with_thermal_lag(runs):
         d = phys_model.diagnostics_
         assert not d["fallback_temperature_only"] and d["die_temperature_source"] == "drive_frequency_Hz"
         assert d["model_family"] == "auxiliary channels" and "dT_die" in d["terms"]
+        # the electronics sit on the case: a case-temperature term is chosen beside the die's
+        assert any(term.startswith("dT_case") for term in d["terms"]), d["terms"]
         assert d["filter_time_constant_s"] == 0.0
         # the drive-frequency slope is config A's, from its device file: f0 * tcf = 30740 Hz * -30 ppm/K
         assert d["drive_frequency_tc_Hz_per_K"] == pytest.approx(30740.0 * -30e-6, rel=1e-3)

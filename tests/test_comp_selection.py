@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from fmvmg_sim.compensation.segments import describe, make_bins, segment_bounds, slope_within, smooth_within
-from fmvmg_sim.compensation.selection import (Candidate, MonomialModel, chained_folds, select,
-                                              tangent_continuation, time_blocks)
+from fmvmg_sim.compensation.selection import (Candidate, MonomialModel, chained_folds, principal_slope_significance,
+                                              select, slope_significance, tangent_continuation, time_blocks)
 
 
 def gapped_ramp():
@@ -89,6 +89,32 @@ def test_beyond_the_range_a_slope_only_where_the_blocks_reproduce_it():
         far = np.array([[40.0]])  # 30 K beyond the cooling's range, 40 K beyond the soak's
         edge = m.predict(np.array([[X.max()]]))[0]
         assert bool(m.predict(far)[0] == pytest.approx(edge)) is held
+
+
+def test_collinear_thermometers_are_carried_along_their_joint_slope():
+    """Two readings of one temperature (a die and a case 0.5 K apart, each with 2 mK of noise): each
+    one's own slope is not reproducible from block to block, their joint slope along the data is, and a
+    candidate asking for the joint test is continued beyond the range instead of held."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0, 4000.0)
+    bins = make_bins(t, 1.0)
+    T = 10 + 20 * t / t[-1]
+    die, case = T + 0.002 * rng.standard_normal(t.size), T + 0.5 + 0.002 * rng.standard_normal(t.size)
+    y = 0.1 * (die - 10) + 0.1 * (case - 10) + rng.normal(0, 0.05, t.size)
+    X = np.column_stack([bins.mean(die) - 20, bins.mean(case) - 20])
+    yb, blocks = bins.mean(y), time_blocks(bins, 8)
+    each = slope_significance(X, yb, bins.counts, blocks, ["die", "case"])
+    joint = principal_slope_significance(X, yb, bins.counts, blocks)
+    assert not each["die"]["significant"] and not each["case"]["significant"]
+    assert joint["significant"] and joint["t"] > 10 * max(each["die"]["t"], each["case"]["t"])
+    assert joint["explained_variance_ratio"] > 0.99 and np.allclose(np.abs(joint["direction"]), 2 ** -0.5, atol=0.01)
+    for test, held in ((None, ["die", "case"]), ("joint", [])):
+        c = Candidate("die + case", "X", ["die", "case"], [(1, 0), (0, 1)], {"slope_test": test} if test else {})
+        sel = select([c], {"X": X}, yb, bins.counts, chained_folds(bins), blocks=blocks)
+        assert sorted(sel.chosen.settings["held"]) == sorted(held), each
+    m = sel.chosen.model().fit(X, yb, bins.counts)  # the joint test's choice, as it will be used
+    # 10 K beyond the range (die 40 C, case 40.5 C): the law itself, 0.1 (40 - 10) + 0.1 (40.5 - 10)
+    assert m.predict(np.array([[20.0, 20.5]]))[0] == pytest.approx(0.1 * 30 + 0.1 * 30.5, abs=0.05)
 
 
 def test_monomial_model_tangent_plane_and_generic_continuation():
