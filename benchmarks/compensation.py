@@ -46,7 +46,7 @@ def pipeline(hours: float = 13.0, method: str = "emd-rbf-ga-kf", synthetic: bool
     t_gen = time.perf_counter() - t0
     comp = get_method(method)(progress=True)
     t1 = time.perf_counter()
-    out = comp.fit_transform(rec)
+    out = comp.fit_transform(rec)["rate_dps"]
     wall = time.perf_counter() - t1
     d = comp.fit_diagnostics_
     return {"method": method, "n_samples": len(rec), "generate_s": round(t_gen, 1), "wall_s": round(wall, 1),
@@ -172,7 +172,8 @@ def holdout(hours: float = 2.0, fs_Hz: float = 10.0, seeds=(21, 22, 23, 24, 25))
             pipe = m != "poly-baseline"
             comp.fit(train, _decomp=(dec_train[0], dict(dec_train[1]))) if pipe else comp.fit(train)
             for c, r in recs.items():
-                out = comp.transform(r, _decomp=(decs[c][0], dict(decs[c][1]))) if pipe else comp.transform(r)
+                out = (comp.compensate_rate_dps(r, _decomp=(decs[c][0], dict(decs[c][1]))) if pipe
+                       else comp.compensate_rate_dps(r))
                 rows[m][c].append(metrics(r, out))
             print(f"seed {seed}: {m} done", file=sys.stderr)
     return {"setup": {"hours": hours, "fs_Hz": fs_Hz, "seeds": list(seeds), "train": "heating, static",

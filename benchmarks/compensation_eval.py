@@ -5,11 +5,12 @@ Usage::
     python benchmarks/compensation_eval.py run GROUP OUTDIR [--seeds 5] [--quick]
     python benchmarks/compensation_eval.py merge OUTDIR DOCSDIR
 
-``run`` evaluates one group of methods (``fast``: raw, poly-baseline, physics; ``vmd``:
+``run`` evaluates one group of methods (``fast``: raw, line, poly-baseline, physics; ``vmd``:
 vmd-wflp-cssvr; ``emd``: emd-rbf, emd-rbf-ga, emd-rbf-ga-kf; ``vmd-native``: vmd-wflp-cssvr
 without decimation, the measured effect of the 100 Hz fix) and pickles the
 :class:`~fmvmg_sim.validation.compensation_eval.Evaluation` to ``OUTDIR/GROUP.pkl``; ``merge`` combines
-the groups found into ``DOCSDIR/compensation_eval.{md,json}`` and the plots. Groups run one
+the groups found into ``DOCSDIR/compensation_eval.{md,json}``, the plots and the generated
+blocks of ``DOCSDIR/compensation_results.md``. Groups run one
 after the other (the machine has 2 shared cores).
 
 Budgets reduced for time (the settings are recorded in the JSON): the CS-SVR search of
@@ -28,7 +29,7 @@ import time
 from pathlib import Path
 
 GROUPS = {
-    "fast": ["raw", "poly-baseline", "physics"],
+    "fast": ["raw", "line", "poly-baseline", "physics"],
     "vmd": ["vmd-wflp-cssvr"],
     "emd": ["emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf"],
     "vmd-native": ["vmd-wflp-cssvr"],
@@ -57,6 +58,7 @@ def main(argv=None) -> int:
     m.add_argument("--groups", default="fast,vmd,emd")
     a = ap.parse_args(argv)
     from fmvmg_sim.validation import compensation_eval as E
+    from fmvmg_sim.validation.doc_blocks import replace_block
     if a.cmd == "run":
         t0 = time.perf_counter()
         ev = E.evaluate(GROUPS[a.group], seeds=a.seeds, quick=a.quick, method_params=PARAMS[a.group],
@@ -81,11 +83,6 @@ def main(argv=None) -> int:
         else:
             print(f"group {g}: no results in {p}", file=sys.stderr)
     ev = E.merge(evs)
-    for k, c in list(ev.curves.items()):  # older runs kept one 16 s rate-table window from 2 s before the 1 Hz sine
-        if k[1] == "rate_table" and "t" in c:
-            t0 = c["t"][0]
-            ev.curves[k] = {f: {n: v[(c["t"] >= t0 + a) & (c["t"] < t0 + b)] for n, v in c.items()}
-                            for f, (a, b) in (("1", (2.0, 6.0)), ("10", (12.0, 12.5)))}
     order = [m for m in E.ALL_METHODS if m in ev.summary] + [m for m in ev.summary if m not in E.ALL_METHODS]
     ev.summary = {m: ev.summary[m] for m in order}
     ev.config["methods"] = order
@@ -95,6 +92,11 @@ def main(argv=None) -> int:
     E.plot_allan(ev, docs / "compensation_allan.png")
     E.plot_traces(ev, docs / "compensation_traces.png")
     E.plot_summary(ev, docs / "compensation_summary.png")
+    page = docs / "compensation_results.md"
+    if page.is_file():
+        replace_block(page, "compensate-eval", E.markdown_table(ev))
+        replace_block(page, "papers", E.papers_table(ev))
+        print(f"wrote the compensate-eval and papers blocks of {page}", file=sys.stderr)
     print(E.markdown_table(ev))
     return 0
 

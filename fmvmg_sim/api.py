@@ -140,7 +140,9 @@ def compensator(method: str, **params):
     -------
     Compensator
         Unfitted: ``comp.fit(train_record)``, then ``comp.transform(record)`` gives the compensated
-        rate (deg/s), or ``comp.fit_transform(record)`` in-sample.
+        record (``rate_dps`` compensated, the input's in ``rate_raw_dps``) and
+        ``comp.compensate_rate_dps(record)`` the compensated rate alone (deg/s);
+        ``comp.fit_transform(record)`` fits and compensates in-sample.
 
     Raises
     ------

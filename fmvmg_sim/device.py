@@ -289,6 +289,18 @@ class Device:
         k_dx = CapacitivePickoff(**ci["drive_pickoff"]).gain_V_per_m * abs(ci["drive_amp"]["gain"])
         return ci["reference"]["vref_V"] / (FullWaveRectifier(gain=ci["rectifier"]["gain"]).describing_gain() * k_dx)
 
+    @property
+    def drive_frequency_tc_Hz_per_K(self) -> float:
+        """Slope of the drive resonance with die temperature at the reference temperature, in Hz/K.
+
+        The central difference of :meth:`at` over +-0.5 K (the drive mode's stiffness and mass laws,
+        both on the die); computed once per device content. A drive frequency read from a record
+        becomes a die temperature change with it.
+        """
+        T = self.reference_temperature_C
+        return _derived(self, "drive_frequency_tc_Hz_per_K", lambda: float(
+            self.at(T + 0.5)["mechanics"]["f_drive_Hz"] - self.at(T - 0.5)["mechanics"]["f_drive_Hz"]))
+
     def _k3_from_rel(self) -> float:
         rel = self.values["mechanics"].get("duffing_k3_rel", 0.0)
         if rel == 0.0:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fmvmg_sim.cli.main import main
-from fmvmg_sim.compensation.synthetic import make_record
+from fmvmg_sim.compensation.synthetic import DriftParams, make_record
 from fmvmg_sim.record import read_record, write_record
 
 
@@ -43,6 +43,39 @@ def test_in_sample_pipeline_json(files, capsys):
     res = json.loads(capsys.readouterr().out)
     assert res["in_sample"] is True and res["fit_diagnostics"]["n_imfs"] >= 3
     assert (files / "ins" / "compensation.json").is_file()
+    # the pipeline low-passes its output: no -1/2 region is left, and its "bias instability" is marked
+    assert res["before"]["allan_validity"]["bias_instability_valid"] is True
+    after = res["after"]["allan_validity"]
+    assert after["arw_valid"] is False and after["bias_instability_valid"] is False
+    assert "white-noise" in after["reasons"]["bias_instability"]
+    assert res["selection"]["chosen"]  # the drift model's selection is reported
+    assert res["baselines"]["held_out"] is False
+    main(["compensate", str(files / "test.csv"), "--method", "emd-rbf", "-o", str(files / "ins2"), "--no-progress"])
+    text = capsys.readouterr().out
+    assert "(not valid*)" in text and "* not valid after, bias instability" in text
+
+
+def test_default_method_and_baselines(tmp_path, capsys):
+    """Without --method the selected polynomial runs; a held-out run is set beside a bias and a line in T."""
+    quiet = DriftParams(arw_dph_per_rtHz=5.0, bias_instability_dph=1.0, a2_dph_per_C2=0.5)  # a curved law
+    write_record(tmp_path / "train.csv", make_record(7200, 10, "ramp", "static", seed=1, params=quiet))
+    write_record(tmp_path / "test.csv", make_record(1800, 10, "cooling", "static", seed=2, params=quiet))
+    files = tmp_path
+    rc = main(["compensate", str(files / "test.csv"), "--train", str(files / "train.csv"), "-o",
+               str(files / "def"), "--json"])
+    assert rc == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["method"] == "poly-baseline"
+    b = res["baselines"]
+    assert b["held_out"] is True and set(b["rms_dps"]) == {"poly-baseline", "bias", "line", "white_noise_floor"}
+    # the synthetic drift has T^2 and dT/dt laws: the selected polynomial beats both references
+    assert b["best"] == "poly-baseline" and b["rms_dps"]["poly-baseline"] < b["rms_dps"]["line"]
+    assert b["rms_dps"]["white_noise_floor"] < b["rms_dps"]["poly-baseline"]
+    assert res["selection"]["chosen"] and res["extrapolation"] is not None
+    # a plain bias calibration is beaten by the line, and the report says so
+    main(["compensate", str(files / "test.csv"), "--method", "bias", "--train", str(files / "train.csv"), "-o",
+          str(files / "bias")])
+    assert "a line in T beats bias on this record" in capsys.readouterr().out
 
 
 def test_bad_inputs_exit_2(files, capsys, tmp_path):
@@ -57,7 +90,7 @@ def test_bad_inputs_exit_2(files, capsys, tmp_path):
     nan.columns["temperature_C"][10] = np.nan
     write_record(tmp_path / "nan.csv", nan)
     cases = [("gappy.csv", "emd-rbf", "uneven steps"), ("short.csv", "emd-rbf-ga", "needs at least"),
-             ("notemp.csv", "poly-baseline", "temperature_C"), ("nan.csv", "poly-baseline", "missing/NaN"),
+             ("notemp.csv", "poly-baseline", "temperature_C"), ("nan.csv", "emd-rbf", "missing/NaN"),
              ("test.csv", "no-such-method", "unknown method")]
     for name, method, msg in cases:
         rc = main(["compensate", str(tmp_path / name if name != "test.csv" else files / name), "--method", method,
@@ -66,3 +99,8 @@ def test_bad_inputs_exit_2(files, capsys, tmp_path):
         assert rc == 2 and msg in err and "Traceback" not in err, (name, err)
     assert main(["compensate", str(tmp_path / "gappy.csv"), "--method", "poly-baseline", "-o",
                  str(tmp_path / "g"), "--json"]) == 0  # poly-baseline handles gaps
+    capsys.readouterr()
+    assert main(["compensate", str(tmp_path / "nan.csv"), "-o", str(tmp_path / "n"), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)  # ... and rows with a missing value, as gaps
+    assert any("data row 11" in n for n in res["notes"])
+    assert np.isnan(read_record(tmp_path / "n" / "compensated.csv")["rate_dps"][10])

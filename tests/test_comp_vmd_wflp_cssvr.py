@@ -40,7 +40,7 @@ def test_compensates_held_out_heating_run(fitted):
     test = make_record(duration_s=7200, fs_Hz=1.0, profile="heating", seed=2)
     truth = test["rate_true_dps"]
     raw_err = rms_dph(test["rate_dps"] - truth)
-    out = fitted.transform(test)
+    out = fitted.compensate_rate_dps(test)
     assert out.shape == (len(test),)
     d = fitted.transform_diagnostics_
     assert d["drift_model_subtracted"] and d["residual_policy"] == "drop"
@@ -53,7 +53,7 @@ def test_residual_policies_are_explicit(fitted):
     test = make_record(duration_s=3600, fs_Hz=1.0, profile="heating", seed=3)
     outs = {}
     for pol in ("drop", "keep", "wflp"):
-        outs[pol] = fitted.set_params(residual=pol).transform(test)
+        outs[pol] = fitted.set_params(residual=pol).compensate_rate_dps(test)
     fitted.set_params(residual="drop")
     diff = outs["keep"] - outs["drop"]
     # "keep" adds back exactly the VMD residual, a large broadband share of the input
@@ -70,7 +70,7 @@ def test_no_drift_mode_means_no_model():
     rec = Record({"time_s": t, "temperature_C": np.full(n, 25.0), "rate_dps": rng.standard_normal(n)})
     m = VMDWFLPCSSVR(**FAST).fit(rec)
     assert m.svr_ is None and "not fitted" in m.fit_diagnostics_["cssvr"]
-    out = m.transform(rec)
+    out = m.compensate_rate_dps(rec)
     assert not m.transform_diagnostics_["drift_model_subtracted"]
     assert out.shape == (n,)
 
@@ -102,13 +102,13 @@ def test_decimated_chain_at_100Hz_compensates_held_out(fitted_100Hz):
         e = (np.asarray(x) - truth).reshape(-1, 10_000).mean(1)
         return float(np.sqrt(np.mean(e ** 2)) * 3600)
 
-    out_all = m.set_params(carry_back="all").transform(test)
+    out_all = m.set_params(carry_back="all").compensate_rate_dps(test)
     td = m.transform_diagnostics_
     assert td["drift_model_subtracted"] and td["carry_back"] == "all" and td["decimation_block"] == 100
     assert td["filter_time_constant_s"] > 0.1  # the dropped noise modes filter the band below 0.5 Hz
     # the band above the 1 Hz rate's Nyquist passes unchanged: it is most of the white noise
     assert td["full_rate_residual_rms_dps"] > 0.9 * np.std(test["rate_dps"] - truth - np.mean(test["rate_dps"]))
-    out_drift = m.set_params(carry_back="drift").transform(test)
+    out_drift = m.set_params(carry_back="drift").compensate_rate_dps(test)
     assert m.transform_diagnostics_["filter_time_constant_s"] == 0.0
     m.set_params(carry_back="all")
     raw = drift(test["rate_dps"])

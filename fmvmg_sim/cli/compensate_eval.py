@@ -80,9 +80,9 @@ def register(sub) -> None:
     """Add the ``compensate-eval`` sub-command to the ``fmvmg`` parser."""
     p = sub.add_parser("compensate-eval", help="honest held-out evaluation of drift compensators",
                        description=__doc__.splitlines()[0])
-    p.add_argument("--methods", default="raw,poly-baseline,physics", metavar="M,...",
-                   help="comma-separated methods ('raw' = uncompensated; 'all' = every method); "
-                        "default raw,poly-baseline,physics")
+    p.add_argument("--methods", default="raw,line,poly-baseline,physics", metavar="M,...",
+                   help="comma-separated methods ('raw' = uncompensated; 'line' = a line in T, the baseline to "
+                        "beat; 'all' = every method); default raw,line,poly-baseline,physics")
     p.add_argument("--seeds", type=int, default=5, metavar="N", help="evaluation seeds (default 5)")
     p.add_argument("--seed-offset", type=int, default=0, metavar="S", help="first evaluation seed (default 0)")
     p.add_argument("--quick", action="store_true", help="short low-rate runs (smoke tests)")

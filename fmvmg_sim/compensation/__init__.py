@@ -1,10 +1,11 @@
 """Temperature-drift compensators that act on records (CONTRACTS.md section 3).
 
 Every method is an estimator with scikit-learn's contract (``fit(record)``,
-``transform(record)``, ``get_params``), registered under its command-line name with
-:func:`register`. Compensation knows nothing of how a record was made.
+``transform(record)`` giving the compensated record, ``get_params``; ``NotFittedError`` before
+``fit``), registered under its command-line name with :func:`register`. Compensation knows
+nothing of how a record was made.
 """
 
-from .base import METHODS, Compensator, get_method, register
+from .base import METHODS, Compensator, compensated_record, get_method, register
 
-__all__ = ["METHODS", "Compensator", "get_method", "register"]
+__all__ = ["METHODS", "Compensator", "compensated_record", "get_method", "register"]

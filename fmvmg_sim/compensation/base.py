@@ -1,4 +1,11 @@
-"""The compensator contract and the registry of methods by command-line name."""
+"""The compensator contract and the registry of methods by command-line name.
+
+A compensator is a scikit-learn estimator on records: ``fit(train)`` learns the drift model,
+``transform(record)`` returns the compensated record (``rate_dps`` compensated, the input's in
+``rate_raw_dps``, every other channel and the metadata copied), ``compensate_rate_dps(record)``
+the compensated rate alone as an array. Before ``fit`` both raise scikit-learn's
+``NotFittedError``.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +13,7 @@ from typing import Callable
 
 import numpy as np
 from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
 
 from ..errors import InputError
 from ..record import Record
@@ -95,8 +103,8 @@ class Compensator(BaseEstimator):
         """
         raise NotImplementedError
 
-    def transform(self, record: Record) -> np.ndarray:
-        """The compensated rate output in deg/s, one value per record row.
+    def compensate_rate_dps(self, record: Record) -> np.ndarray:
+        """The compensated rate output in deg/s, one value per record row (NaN where a row is missing).
 
         Parameters
         ----------
@@ -110,7 +118,51 @@ class Compensator(BaseEstimator):
         """
         raise NotImplementedError
 
-    def fit_transform(self, record: Record) -> np.ndarray:
+    def transform(self, record: Record) -> Record:
+        """The compensated record: ``rate_dps`` compensated, the input's in ``rate_raw_dps``.
+
+        Parameters
+        ----------
+        record : Record
+            The record to compensate.
+
+        Returns
+        -------
+        Record
+            Every channel and metadata line of ``record`` copied, ``rate_dps`` replaced by
+            :meth:`compensate_rate_dps`, ``rate_raw_dps`` added, and the metadata line
+            ``compensation_method``.
+
+        Raises
+        ------
+        sklearn.exceptions.NotFittedError
+            Before :meth:`fit`.
+        """
+        check_is_fitted(self)
+        return compensated_record(record, self.compensate_rate_dps(record), self.method_name)
+
+    def selection_report(self) -> dict | None:
+        """What the fitted method chose by validation, and every option's score (None if it chose nothing).
+
+        Returns
+        -------
+        dict or None
+            :meth:`fmvmg_sim.compensation.selection.Selection.report` of the fit.
+
+        Raises
+        ------
+        sklearn.exceptions.NotFittedError
+            Before :meth:`fit`.
+        """
+        check_is_fitted(self)
+        d = getattr(self, "diagnostics_", None) or getattr(self, "fit_diagnostics_", None) or {}
+        return d.get("selection") or (d.get("drift_model") or {}).get("selection")
+
+    def _fit_compensate_rate_dps(self, record: Record) -> np.ndarray:
+        """Fit on ``record`` and compensate it (a method that can share work between the two overrides this)."""
+        return self.fit(record).compensate_rate_dps(record)
+
+    def fit_transform(self, record: Record) -> Record:
         """Fit on ``record`` and compensate the same record (in-sample).
 
         Parameters
@@ -120,7 +172,30 @@ class Compensator(BaseEstimator):
 
         Returns
         -------
-        ndarray
-            Compensated ``rate_dps``.
+        Record
+            As :meth:`transform`.
         """
-        return self.fit(record).transform(record)
+        return compensated_record(record, self._fit_compensate_rate_dps(record), self.method_name)
+
+
+def compensated_record(record: Record, rate_dps: np.ndarray, method: str) -> Record:
+    """``record`` with ``rate_dps`` replaced by a compensated rate and the input's kept as ``rate_raw_dps``.
+
+    Parameters
+    ----------
+    record : Record
+        The record that was compensated.
+    rate_dps : ndarray
+        Its compensated rate, one value per row.
+    method : str
+        The method's name, written to the ``compensation_method`` metadata line.
+
+    Returns
+    -------
+    Record
+        A new record (the input is not changed).
+    """
+    cols = dict(record.columns)
+    cols["rate_raw_dps"] = record["rate_dps"]
+    cols["rate_dps"] = np.asarray(rate_dps, dtype=float)
+    return Record(cols, {**record.metadata, "compensation_method": method}, record.path)

@@ -21,9 +21,11 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import TimeSeriesSplit
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVR
+from sklearn.utils.validation import check_is_fitted
 from tqdm import tqdm
 
 from .cuckoo import SearchResult, cuckoo_search, de_search, grid_search
+from .selection import tangent_continuation
 
 
 def temperature_features(time_s, temperature_C, smooth_s: float = 60.0) -> np.ndarray:
@@ -189,11 +191,12 @@ class CSSVR(BaseEstimator, RegressorMixin):
         -------
         CSSVR
             ``self``, with ``C_``, ``sigma_``, ``cv_rmse_``, ``search_result_``, ``n_points_``
-            (training points after block averaging) and ``svr_``.
+            (training points after block averaging), ``svr_`` and the input box ``lo_``/``hi_``.
         """
         if self.search not in ("cuckoo", "grid", "de"):
             raise ValueError(f"search must be 'cuckoo', 'grid' or 'de', got {self.search!r}")
         Xs, ys = self._prepare(X, y)
+        self.lo_, self.hi_ = np.min(X, axis=0), np.max(X, axis=0)
         bounds = [self.log10_C_bounds, self.log10_sigma_bounds]
         bar = tqdm(total=self.budget, desc=f"CS-SVR {self.search} search", disable=not self.progress, leave=False)
 
@@ -217,7 +220,11 @@ class CSSVR(BaseEstimator, RegressorMixin):
         return self
 
     def predict(self, X) -> np.ndarray:
-        """Predicted drift.
+        """Predicted drift; beyond the training inputs' box, continued along the tangent plane.
+
+        An RBF SVR far outside its data returns its intercept, and near the edge the tail of
+        its kernels: neither is a forecast. :func:`.selection.tangent_continuation` extends it
+        linearly from the edge instead.
 
         Parameters
         ----------
@@ -228,7 +235,9 @@ class CSSVR(BaseEstimator, RegressorMixin):
         -------
         ndarray, shape (n,)
         """
-        return self.svr_.predict(self.scaler_.transform(np.asarray(X, dtype=float)))
+        check_is_fitted(self, "svr_")
+        return tangent_continuation(lambda Z: self.svr_.predict(self.scaler_.transform(Z)),
+                                    np.asarray(X, dtype=float), self.lo_, self.hi_)
 
 
 def compare_searches(X, y, budget: int, seed: int = 0, **kw) -> dict[str, CSSVR]:

@@ -16,6 +16,7 @@ instead) and applies the drift model. Everything the method drops, decimates or 
 from __future__ import annotations
 
 import numpy as np
+from sklearn.utils.validation import check_is_fitted
 from tqdm import tqdm
 
 from ..record import Record
@@ -25,7 +26,8 @@ from .emd import emd_decompose, trend
 from .ga import ga_budget, genetic_minimize
 from ..analysis.allan import allan_deviation
 from .kalman import ScalarKalman, cutoff_Hz, noise_variances
-from .poly import bin_means, check_record, fit_ols, rate_error, thermal_features
+from .poly import check_record, rate_error
+from .thermal_model import TemperatureModel
 from .rbf import RBFNetwork, delay_embed, gaussian_design, ridge_weights
 
 #: Fewest samples the pipeline accepts (EMD, 20k-sample entropy segments, 60/20/20 split).
@@ -109,9 +111,8 @@ class EMDRBF(Compensator):
                 "dropped_noise_variance_fraction": float(np.var(groups["noise"]) / var)}
         return groups, diag
 
-    def _features(self, record, fs):
-        tr, info = trend(record.time_s, record["temperature_C"], fs, self.trend_min_period_s)
-        return thermal_features(record.time_s, tr, self.T_ref_C_, presmoothed=True), tr, info
+    def _trend(self, record, fs):
+        return trend(record.time_s, record["temperature_C"], fs, self.trend_min_period_s)
 
     # -- RBF ------------------------------------------------------------------------------
     def _fit_rbf(self, x):
@@ -160,6 +161,28 @@ class EMDRBF(Compensator):
         X, _ = delay_embed((x - mu) / sd, self.delay)
         return net.predict(X) * sd + mu
 
+    def _filter_time_constant(self, diag: dict, fs: float) -> tuple[float, str]:
+        """Longest time constant of what the pipeline drops or filters, in s, and where it comes from.
+
+        1 / (2 pi f_c) of the Kalman filter, (mean period) / (2 pi) of the longest dropped noise
+        IMF, and the RBF's embedding window (2 d + 1) / fs; the Allan bias instability is only
+        worth reading at tau well above it.
+        """
+        tcs = {}
+        noise = [p for p, c in zip(diag.get("mean_period_s") or [], diag.get("classes") or [])
+                 if c == "noise" and np.isfinite(p)]
+        if noise:
+            tcs["dropped noise IMFs"] = max(noise) / (2 * np.pi)
+        if diag.get("rbf_applied"):
+            tcs["RBF embedding"] = (2 * self.delay + 1) / fs / (2 * np.pi)
+        kf = getattr(self, "fit_diagnostics_", {}).get("kf") if self.use_kf else None
+        if kf and kf.get("cutoff_Hz"):
+            tcs["Kalman filter"] = 1.0 / (2 * np.pi * float(kf["cutoff_Hz"]))
+        if not tcs:
+            return 0.0, "nothing dropped or filtered"
+        k = max(tcs, key=tcs.get)
+        return float(tcs[k]), f"{k} ({', '.join(f'{n} {v:.3g} s' for n, v in tcs.items())})"
+
     # -- estimator API ----------------------------------------------------------------------
     def _check(self, record):
         if self.denoiser_fit not in ("record", "train"):
@@ -182,14 +205,12 @@ class EMDRBF(Compensator):
         """
         fs = self._check(record)
         groups, diag = _decomp or self._decompose(record.time_s, rate_error(record), fs)
-        self.T_ref_C_ = float(np.mean(record["temperature_C"]))
-        F, _, tinfo = self._features(record, fs)
-        t = record.time_s
-        Fb = np.column_stack([bin_means(t, F[:, k])[1] for k in range(F.shape[1])])
-        self.drift_coef_ = fit_ols(Fb, bin_means(t, groups["drift"])[1])
+        tr, tinfo = self._trend(record, fs)
+        self.drift_model_ = TemperatureModel(presmoothed=True).fit(record.time_s, tr, groups["drift"])
+        self.T_ref_C_ = self.drift_model_.T_ref_C_
         diag.update({"method": self.method_name, "fs_Hz": fs, "n_samples": len(record), "temperature_trend": tinfo,
-                     "drift_model": {"regressors": ["1", "dT_C", "dT2_C2", "dTdt_C_per_min"],
-                                     "coef_dps": self.drift_coef_.tolist(), "fit_rate_Hz": 1.0}})
+                     "drift_model": {**self.drift_model_.report(), "fit_rate_Hz": 1.0,
+                                     "target": "the drift group (drift IMFs + residue)"}})
         self.denoiser_ = None
         if self.denoiser_fit == "train" and np.any(groups["mixed"]):
             *self.denoiser_, diag["rbf"] = self._fit_rbf(groups["mixed"])
@@ -212,7 +233,7 @@ class EMDRBF(Compensator):
         self.fit_diagnostics_ = diag
         return self
 
-    def transform(self, record: Record, _decomp=None) -> np.ndarray:
+    def compensate_rate_dps(self, record: Record, _decomp=None) -> np.ndarray:
         """Compensated rate in deg/s (noise group dropped, mixed denoised, drift compensated).
 
         Parameters
@@ -224,6 +245,7 @@ class EMDRBF(Compensator):
         -------
         ndarray
         """
+        check_is_fitted(self, "drift_model_")
         fs = self._check(record)
         groups, diag = _decomp or self._decompose(record.time_s, record["rate_dps"], fs)
         mixed, den = groups["mixed"], self.denoiser_
@@ -233,14 +255,16 @@ class EMDRBF(Compensator):
             mixed = self._apply_rbf(mixed, den)
         if self.use_kf:
             mixed = ScalarKalman(self.kf_q_, self.kf_r_).filter(mixed)
-        F, _, tinfo = self._features(record, fs)
-        drift = groups["drift"] - (self.drift_coef_[0] + F @ self.drift_coef_[1:])
+        tr, tinfo = self._trend(record, fs)
+        drift = groups["drift"] - self.drift_model_.predict(record.time_s, tr)
         diag.update({"temperature_trend": tinfo, "kf_applied": self.use_kf, "rbf_applied": den is not None,
-                     "rbf_fitted_on": self.denoiser_fit})
+                     "rbf_fitted_on": self.denoiser_fit,
+                     "extrapolation": self.drift_model_.extrapolation(record.time_s, tr)})
+        diag["filter_time_constant_s"], diag["filter_time_constant_source"] = self._filter_time_constant(diag, fs)
         self.transform_diagnostics_ = diag
         return mixed + drift
 
-    def fit_transform(self, record: Record) -> np.ndarray:
+    def _fit_compensate_rate_dps(self, record: Record) -> np.ndarray:
         """Fit and compensate the same record (in-sample); decomposes once when no truth is known.
 
         Parameters
@@ -256,7 +280,7 @@ class EMDRBF(Compensator):
         e = rate_error(record)
         dec = self._decompose(record.time_s, e, fs) if np.array_equal(e, record["rate_dps"]) else None
         self.fit(record, _decomp=None if dec is None else (dec[0], dict(dec[1])))
-        return self.transform(record, _decomp=None if dec is None else (dec[0], dict(dec[1])))
+        return self.compensate_rate_dps(record, _decomp=None if dec is None else (dec[0], dict(dec[1])))
 
 
 @register("emd-rbf-ga")

@@ -4,82 +4,118 @@ Where the drift comes from
 --------------------------
 In an open-loop vibratory gyro the zero-rate output is mostly quadrature leaking into the
 rate channel through a phase error between the sense signal and the demodulation
-reference: rate_err ~ Q * sin(phi(T_die)) + (damping asymmetry ~ 1/Q_factor) + small
-electronic offsets. The record carries the three quantities this needs, measured by the
-gyro itself rather than by a thermometer glued to the case:
+reference: rate_err ~ Q * sin(phi(T)) + (damping asymmetry ~ 1/Q_factor) + small
+electronic offsets. The record carries the quantities this needs, measured by the gyro
+itself rather than by a thermometer glued to the case:
 
 * ``quadrature_V``: the quadrature amplitude Q that leaks;
-* ``drive_frequency_Hz``: the drive resonance falls about 0.92 Hz/K, so it is the die's own
-  thermometer and follows the die through any thermal lag between case and die;
-* ``agc_effort_V``: the drive-amplitude control effort, proportional to the drive damping
-  (1/Q factor), so it tracks the damping-asymmetry term.
+* ``drive_frequency_Hz``: the drive resonance moves with the die temperature (its slope
+  comes from the device file named in the record's ``# device:`` line,
+  :attr:`fmvmg_sim.device.Device.drive_frequency_tc_Hz_per_K`), so it is the die's own thermometer and follows the die through any case-to-die lag;
+* ``agc_effort_V``: the drive-amplitude control effort, proportional to the drive damping.
 
-Regressors (and why so few)
----------------------------
-With dT_d the die temperature change read from the drive frequency (k_f fitted on the
-training run, about -0.92 Hz/K) and a phase error expanded to first order,
-phi(T) ~ phi0 + phi1 dT_d, the leak is Q phi0 + Q phi1 dT_d. The model is
+Model and its selection
+-----------------------
+The MEMS element's laws (resonances, quadrature, damping) follow the die; the electronics
+(amplifier bandwidths, phase shifter, reference, rectifier) sit on the board, at the case
+temperature that ``temperature_C`` reads. With dT_die the die temperature change read from the
+drive frequency and dT_case the change of ``temperature_C``, the candidate models are least
+squares on 1 s bin means of the training error of
 
-    rate_err = c0 + c1 Q + c2 Q dT_d + c3 dT_d + c4 dT_d^2 + c5 A_agc
+    rate_err = c0 + c3 dT_die [+ c4 dT_die^2] [+ c1 Q [+ c2 Q dT_die]] [+ c5 A_agc]
+               [+ c6 dT_case [+ c7 dT_case^2]]
 
-c1 and c2 are the leak through the phase (constant and temperature-dependent part), c3 and
-c4 the remaining electronic temperature laws (offsets, reference drift) read on the die
-thermometer, c5 the damping term. Six coefficients: every one has a physical reason, the
-design stays well conditioned after standardising, and a model this small cannot learn a
-training run's noise (an RBF or SVR on the same inputs could). No dT/dt term: with the die
-thermometer there is no case-to-die lag left to imitate (the poly baseline needs dT/dt for
-exactly that).
+(c1, c2: the leak through a phase expanded to first order in temperature; c3, c4: the other
+temperature laws on the die's thermometer; c5: the damping term; c6, c7: the electronics' laws
+on the case), each with the auxiliary channels smoothed over one of ``smoothing_s`` (their own
+noise must not reach the output), beside the temperature models of :mod:`.thermal_model` on
+``temperature_C``. Which one is used is chosen by forward-chained validation on the training
+record (:mod:`.selection`): on a record whose auxiliary channels carry nothing the temperature
+does not, a temperature model wins and the report says so. The AGC term is left out beforehand
+when the die temperature explains the AGC effort to R^2 > 1 - :data:`AGC_COLLINEAR_TOL`
+(collinear columns make the coefficients swing). Without the drive frequency the die and case
+temperatures are the same reading and the case terms are not offered.
 
 How it is applied
 -----------------
-The model is fitted by ordinary least squares on 1 s bin means of the training error
-(``rate_dps - rate_true_dps``; the truth is taken as 0 when absent, i.e. a static run). The
-regressors are 1 s bin means smoothed over ``smooth_s`` seconds (the auxiliary channels have
-their own noise, which must not be injected into the output), interpolated back to the
-record's time base, and the predicted drift is *subtracted* from ``rate_dps``. The signal
-path is not filtered: the output is the input minus a slowly varying correction, so the
-bandwidth and the white noise are those of the raw output (``filter_time_constant_s`` = 0 in
-the diagnostics; the correction's own smoothing is ``correction_smoothing_s``).
+The regressors are computed on 1 s bins of the record (inside the stretches between gaps),
+the predicted drift is interpolated back to the samples and *subtracted* from ``rate_dps``.
+The signal path is not filtered (``filter_time_constant_s`` = 0 in the diagnostics; the
+correction's own smoothing is ``correction_smoothing_s``). The regressors all follow the
+temperature, so in training they are nearly collinear: their coefficients are pinned down along
+the data and not across it. Beyond the range seen in training the model is therefore evaluated
+at the training point nearest in all its regressors (a combination the data fixed, not a
+clamped corner of the box) and continued from there along its tangent plane, when the drift's
+slope along the regressors' principal direction is reproducible over the record's time blocks
+(:func:`.selection.principal_slope_significance`); otherwise it is held there. The transform
+diagnostics say which channels left the range and by how much.
 
 Fallback
 --------
-Without the auxiliary channels (e.g. an imported record) the model falls back to temperature
-alone, [dT, dT^2, dT/dt] on ``temperature_C`` (the poly baseline's regressors), with a
-:class:`PhysicsFallbackWarning` and ``diagnostics_["fallback_temperature_only"] = True``.
-With only some channels missing, the missing terms are dropped (die temperature from
-``temperature_C`` when the drive frequency is missing) and the diagnostics list them.
-Gaps (uneven steps) are handled: bins and derivatives use the actual times.
+Without any auxiliary channel (e.g. an imported record) the model *is* the temperature model
+(the ``poly-baseline`` selection), with a :class:`PhysicsFallbackWarning` and
+``diagnostics_["fallback_temperature_only"] = True``. With only some channels missing, their
+terms are dropped (die temperature from ``temperature_C`` when the drive frequency is
+missing) and the diagnostics list them.
 """
 
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
+from sklearn.utils.validation import check_is_fitted
 
+from ..device import Device, load_device
 from ..errors import InputError
+from ..paths import devices_dir
 from ..record import Record
 from .base import Compensator, register
-from .poly import bin_means, check_record, rate_error, thermal_features
+from .poly import check_record, complete_rows, rate_error
+from .segments import Bins, describe, make_bins, smooth_within
+from .selection import Candidate, chained_folds, select, time_blocks
+from .thermal_model import UNITS, TemperatureModel, summarise_extrapolation
 
 #: Auxiliary channels the full model uses.
 AUX_CHANNELS = ("quadrature_V", "drive_frequency_Hz", "agc_effort_V")
 #: ``use_agc="auto"`` drops the AGC term when the die temperature explains it to R^2 > 1 - this.
 AGC_COLLINEAR_TOL = 1e-3
+#: Smoothing spans of the auxiliary channels offered by default, in s.
+SMOOTHING_S = (10.0, 30.0, 120.0)
+#: Base variables of the auxiliary models and their units.
+AUX_VARS = ["Q", "dT_die", "A_agc", "dT_case"]
+AUX_UNITS = {"Q": "V", "dT_die": "K", "A_agc": "V", "dT_case": "K", **UNITS}
 
 
 class PhysicsFallbackWarning(UserWarning):
     """The physics compensator had to drop auxiliary terms (fallback to temperature)."""
 
 
-def _smoothed_bins(t_s: np.ndarray, x: np.ndarray, smooth_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """1 s bin means of ``x`` smoothed by a centred moving average of ``smooth_s`` bins."""
-    tb, xb = bin_means(t_s, x, 1.0)
-    w = max(1, min(int(round(smooth_s)), len(xb)))
-    if w > 1:
-        xb = uniform_filter1d(xb, w, mode="nearest")
-    return tb, xb
+def find_device(name: str) -> Device | None:
+    """The shipped device whose name (or file stem) is ``name``, or a device file at that path.
+
+    Parameters
+    ----------
+    name : str
+        A record's ``# device:`` value (``fmvmg-a``), a shipped file stem (``fmvmg_a``) or a path.
+
+    Returns
+    -------
+    Device or None
+        None when nothing matches.
+    """
+    p = Path(name)
+    if p.suffix == ".toml" and p.is_file():
+        return load_device(p)
+    for f in sorted(devices_dir().glob("*.toml")):
+        if f.stem in (name, name.replace("-", "_")):
+            return load_device(f)
+    for f in sorted(devices_dir().glob("*.toml")):
+        dev = load_device(f)
+        if dev.name == name:
+            return dev
+    return None
 
 
 @register("physics")
@@ -88,67 +124,112 @@ class PhysicsCompensator(Compensator):
 
     Parameters
     ----------
-    smooth_s : float, optional
-        Moving-average span of the regressors (1 s bin means), in s; sets the bandwidth of the
-        correction, not of the signal.
+    smoothing_s : tuple of float, optional
+        Moving-average spans of the auxiliary channels to choose from, in s (they set the
+        bandwidth of the correction, not of the signal).
     use_agc : {"auto", True, False}, optional
-        Include the AGC-effort (damping) term. ``"auto"`` (default) includes it only when it
-        carries information beyond the die temperature on the training run: when
-        [dT_die, dT_die^2] explain it to R^2 > ``1 - AGC_COLLINEAR_TOL`` it is dropped (in the
-        simulator's default device the damping is a function of temperature alone, and the
-        collinear pair makes the coefficients swing by tens of deg/s in opposite directions).
+        Offer the AGC-effort (damping) term. ``"auto"`` offers it only when it carries
+        information beyond the die temperature on the training run (R^2 of the AGC effort on
+        [dT_die, dT_die^2] below ``1 - AGC_COLLINEAR_TOL``).
+    temperature_models : bool, optional
+        Also offer the temperature models of ``poly-baseline`` to the selection.
+    device : str, optional
+        Device name or file for the drive-frequency slope (default: the record's
+        ``# device:`` line).
+    rule : {"best", "one-se"}, optional
+        Selection rule (:func:`.selection.select`).
+    n_folds : int, optional
+        Forward-chained validation folds.
+    min_train_fraction : float, optional
+        Fraction of the training record the first fold is fitted on.
+    case_orders : tuple of int, optional
+        Orders of the case-temperature (electronics) terms to choose from (0: none).
     """
 
     handles_gaps = True
 
-    def __init__(self, smooth_s: float = 30.0, use_agc="auto"):
-        self.smooth_s = smooth_s
-        self.use_agc = use_agc
+    def __init__(self, smoothing_s=SMOOTHING_S, use_agc="auto", temperature_models=True, device=None,
+                 rule="best", n_folds=4, min_train_fraction=0.5, case_orders=(0, 1, 2)):
+        self.smoothing_s, self.use_agc, self.temperature_models = smoothing_s, use_agc, temperature_models
+        self.case_orders = case_orders
+        self.device, self.rule, self.n_folds, self.min_train_fraction = device, rule, n_folds, min_train_fraction
 
     # -- regressors ----------------------------------------------------------------------------
-    def _available(self, record: Record) -> dict:
+    @staticmethod
+    def _available(record: Record) -> dict:
         return {c: record.has(c) and bool(np.isfinite(record[c]).all()) for c in AUX_CHANNELS}
 
-    def _columns(self, record: Record) -> tuple[np.ndarray, np.ndarray]:
-        """(bin times, raw regressor columns on 1 s bins) for the terms in ``self.terms_``."""
-        t = record.time_s
-        if self.fallback_:
-            X = thermal_features(t, record["temperature_C"], self.T_ref_C_, self.smooth_s)
-            cols = [bin_means(t, X[:, k])[1] for k in range(3)]
-            return bin_means(t, X[:, 0])[0], np.column_stack(cols)
+    def _aux_base(self, record: Record, bins: Bins, span: float) -> np.ndarray:
+        """[Q, dT_die, A_agc, dT_case] per bin (columns of missing channels are zeros)."""
+        def sm(c):
+            return smooth_within(bins, bins.mean(record[c]), span)
+        dTc = sm("temperature_C") - self.T_ref_C_
         if self.die_source_ == "drive_frequency_Hz":
-            tb, fb = _smoothed_bins(t, record["drive_frequency_Hz"], self.smooth_s)
-            dTd = (fb - self.f_ref_Hz_) / self.kf_Hz_per_K_
+            dTd = (sm("drive_frequency_Hz") - self.f_ref_Hz_) / self.kf_Hz_per_K_
         else:
-            tb, Tb = _smoothed_bins(t, record["temperature_C"], self.smooth_s)
-            dTd = Tb - self.T_ref_C_
-        feats = {"dT_die": dTd, "dT_die^2": dTd * dTd}
-        if "quadrature_V" in self.channels_:
-            q = _smoothed_bins(t, record["quadrature_V"], self.smooth_s)[1] - self.q_ref_V_
-            feats["Q"] = q
-            feats["Q*dT_die"] = q * dTd
-        if "agc_effort_V" in self.channels_:
-            feats["A_agc"] = _smoothed_bins(t, record["agc_effort_V"], self.smooth_s)[1] - self.a_ref_V_
-        return tb, np.column_stack([feats[k] for k in self.terms_])
+            dTd = dTc
+        z = np.zeros(len(bins))
+        q = sm("quadrature_V") - self.q_ref_V_ if "quadrature_V" in self.channels_ else z
+        a = sm("agc_effort_V") - self.a_ref_V_ if "agc_effort_V" in self.channels_ else z
+        return np.column_stack([q, dTd, a, dTc])
 
-    def _agc_r2(self, record: Record) -> float:
+    def _base(self, record: Record, bins: Bins, key) -> np.ndarray:
+        kind, span = key
+        if kind == "aux":
+            return self._aux_base(record, bins, span)
+        return self.tmodel_.base(bins, bins.mean(record["temperature_C"]), span)
+
+    def _aux_candidates(self) -> list[Candidate]:
+        has_q, has_a = "quadrature_V" in self.channels_, "agc_effort_V" in self.channels_
+        # the case temperature is a second thermometer only when the die's is the drive frequency
+        case_orders = tuple(self.case_orders) if self.die_source_ == "drive_frequency_Hz" else (0,)
+        out = []
+        for span in self.smoothing_s:
+            for die in (1, 2):
+                for nq in ((0, 1, 2) if has_q else (0,)):
+                    for na in ((0, 1) if has_a else (0,)):
+                        for nc in case_orders:
+                            e = [(0, k, 0, 0) for k in range(1, die + 1)]
+                            e += [(1, 0, 0, 0), (1, 1, 0, 0)][:nq] + [(0, 0, 1, 0)][:na]
+                            e += [(0, 0, 0, k) for k in range(1, nc + 1)]
+                            name = " + ".join(["dT_die" if die == 1 else "dT_die, dT_die^2"]
+                                              + ["Q", "Q, Q*dT_die"][nq - 1:nq] + ["A_agc"][:na]
+                                              + ["dT_case", "dT_case, dT_case^2"][nc - 1:nc])
+                            out.append(Candidate(f"{name} ({span:g} s)", ("aux", span), AUX_VARS, e,
+                                                 {"die_order": die, "quadrature_terms": nq, "agc_term": bool(na),
+                                                  "case_order": nc, "smoothing_s": span, "held": [],
+                                                  "anchor": True, "continuation": "tangent",
+                                                  "slope_test": "joint"}))
+        return out
+
+    def _agc_r2(self, record: Record, bins: Bins) -> float:
         """R^2 of the smoothed AGC effort on [1, dT_die, dT_die^2] (training record)."""
-        t = record.time_s
-        tb, fb = _smoothed_bins(t, record[self.die_source_], self.smooth_s)
-        d = fb - fb.mean()
-        a = _smoothed_bins(t, record["agc_effort_V"], self.smooth_s)[1]
+        X = self._aux_base(record, bins, self.smoothing_s[0])
+        d, a = X[:, 1], X[:, 2]
         A = np.column_stack([np.ones(len(d)), d, d * d])
         r = a - A @ np.linalg.lstsq(A, a, rcond=None)[0]
         var = float(np.var(a))
         return 1.0 if var == 0 else float(1.0 - np.var(r) / var)
 
-    def _design(self, record: Record) -> tuple[np.ndarray, np.ndarray]:
-        tb, X = self._columns(record)
-        return tb, (X - self.x_mean_) / self.x_scale_
+    def _drive_slope(self, record: Record, bins: Bins, notes: list) -> tuple[float, str]:
+        name = self.device or record.metadata.get("device")
+        dev = find_device(name) if name else None
+        if dev is not None:
+            return dev.drive_frequency_tc_Hz_per_K, f"device file {dev.name!r} (Device.drive_frequency_tc_Hz_per_K)"
+        Tb, fb = bins.mean(record["temperature_C"]), bins.mean(record["drive_frequency_Hz"])
+        if np.ptp(Tb) > 1.0:
+            slope = float(np.polyfit(Tb - Tb.mean(), fb, 1)[0])
+            if abs(slope) > 1e-6:
+                notes.append(f"device {name!r} unknown: drive-frequency slope fitted on the training run"
+                             if name else "no device named: drive-frequency slope fitted on the training run")
+                return slope, "fitted on the training run (drive frequency against temperature_C)"
+        notes.append("drive-frequency slope unknown (no device file, temperature span < 1 K): dT_die is "
+                     "the drive-frequency change in Hz (the fit is unaffected; ranges are in Hz)")
+        return 1.0, "unknown: dT_die in Hz"
 
     # -- estimator API ---------------------------------------------------------------------------
     def fit(self, record: Record) -> "PhysicsCompensator":
-        """Fit the drift model on a training record.
+        """Choose and fit the drift model on a training record.
 
         Parameters
         ----------
@@ -158,28 +239,32 @@ class PhysicsCompensator(Compensator):
         Returns
         -------
         PhysicsCompensator
-            ``self``, with ``coef_`` (deg/s per standardised regressor, intercept first),
-            ``terms_``, ``fallback_`` and ``diagnostics_``.
+            ``self``, with ``model_``, ``key_`` (which regressors), ``terms_``, ``fallback_`` and
+            ``diagnostics_`` (the selection with every option's validation score).
         """
-        check_record(record, need_uniform=False, min_samples=16, method=self.method_name)
-        avail = self._available(record)
-        t = record.time_s
-        self.T_ref_C_ = float(np.mean(record["temperature_C"]))
+        check_record(record, need_uniform=False, min_samples=16, method=self.method_name, allow_missing=True)
+        record, _, gap_note = complete_rows(record)
         if self.use_agc not in ("auto", True, False):
             raise ValueError(f"use_agc must be 'auto', True or False, got {self.use_agc!r}")
+        avail = self._available(record)
+        t = record.time_s
+        bins = make_bins(t)
+        self.T_ref_C_ = float(np.average(bins.mean(record["temperature_C"]), weights=bins.counts))
         self.channels_ = [c for c in AUX_CHANNELS if avail[c] and (c != "agc_effort_V" or self.use_agc)]
         missing = [c for c in AUX_CHANNELS if not avail[c]]
         self.fallback_ = not any(avail.values())
-        notes = []
-        self.agc_r2_ = None
+        notes, self.agc_r2_, self.kf_Hz_per_K_, kf_source = [gap_note] if gap_note else [], None, None, None
+        self.tmodel_ = TemperatureModel(n_folds=self.n_folds, min_train_fraction=self.min_train_fraction,
+                                        rule=self.rule)
         if self.fallback_:
-            self.terms_ = ["dT_case", "dT_case^2", "dTdt_case_C_per_min"]
-            self.die_source_ = "temperature_C"
             msg = ("physics: the record has none of the auxiliary channels "
-                   f"({', '.join(AUX_CHANNELS)}); falling back to a temperature-only model "
-                   "[dT, dT^2, dT/dt] on temperature_C (it cannot see thermal lag or quadrature changes)")
+                   f"({', '.join(AUX_CHANNELS)}); falling back to a temperature-only model, the one "
+                   "poly-baseline selects (it cannot see a case-to-die lag or quadrature changes)")
             warnings.warn(msg, PhysicsFallbackWarning, stacklevel=2)
             notes.append(msg)
+            self.tmodel_.fit(t, record["temperature_C"], rate_error(record))
+            self.key_, self.model_, sel = ("T", self.tmodel_.span_), self.tmodel_.model_, self.tmodel_.selection_
+            self.die_source_ = "temperature_C"
         else:
             if missing:
                 msg = (f"physics: auxiliary channel(s) {', '.join(missing)} missing; their terms are dropped"
@@ -188,54 +273,57 @@ class PhysicsCompensator(Compensator):
                 notes.append(msg)
             self.die_source_ = "drive_frequency_Hz" if avail["drive_frequency_Hz"] else "temperature_C"
             if self.die_source_ == "drive_frequency_Hz":
-                tb, fb = bin_means(t, record["drive_frequency_Hz"])
-                Tb = bin_means(t, record["temperature_C"])[1]
-                self.f_ref_Hz_ = float(np.mean(fb))
-                slope = np.polyfit(Tb - Tb.mean(), fb, 1)[0] if np.ptp(Tb) > 1.0 else 0.0
-                if abs(slope) < 1e-3:  # soak or no usable temperature span: nominal coefficient
-                    slope = -0.92
-                    notes.append("drive-frequency temperature coefficient not identifiable on the "
-                                 "training run (span < 1 K): nominal -0.92 Hz/K used (only scales dT_die)")
-                self.kf_Hz_per_K_ = float(slope)
+                self.f_ref_Hz_ = float(np.average(bins.mean(record["drive_frequency_Hz"]), weights=bins.counts))
+                self.kf_Hz_per_K_, kf_source = self._drive_slope(record, bins, notes)
             self.q_ref_V_ = float(np.mean(record["quadrature_V"])) if "quadrature_V" in self.channels_ else 0.0
             self.a_ref_V_ = float(np.mean(record["agc_effort_V"])) if "agc_effort_V" in self.channels_ else 0.0
-            self.terms_ = ["dT_die", "dT_die^2"]
             if "agc_effort_V" in self.channels_ and self.use_agc == "auto":
-                self.agc_r2_ = self._agc_r2(record)
+                self.agc_r2_ = self._agc_r2(record, bins)
                 if self.agc_r2_ > 1.0 - AGC_COLLINEAR_TOL:
                     self.channels_.remove("agc_effort_V")
-                    notes.append(f"agc_effort_V dropped: the die temperature explains it to R^2 = {self.agc_r2_:.5f} "
-                                 "on the training run (no independent information; collinear terms would make "
-                                 "the fit ill-conditioned)")
-            if "quadrature_V" in self.channels_:
-                self.terms_ += ["Q", "Q*dT_die"]
-            if "agc_effort_V" in self.channels_:
-                self.terms_ += ["A_agc"]
-        self.x_mean_, self.x_scale_ = 0.0, 1.0
-        _, X = self._columns(record)
-        self.x_mean_ = X.mean(axis=0)
-        sd = X.std(axis=0)
-        self.x_scale_ = np.where(sd > 0, sd, 1.0)
-        Xs = (X - self.x_mean_) / self.x_scale_
-        yb = bin_means(t, rate_error(record))[1]
-        A = np.column_stack([np.ones(len(Xs)), Xs])
-        self.coef_, *_ = np.linalg.lstsq(A, yb, rcond=None)
-        resid = yb - A @ self.coef_
+                    notes.append(f"agc_effort_V not offered: the die temperature explains it to R^2 = "
+                                 f"{self.agc_r2_:.5f} on the training run (collinear terms would make the fit "
+                                 "ill-conditioned)")
+            cands = self._aux_candidates()
+            sampling = describe(t)
+            if self.temperature_models:
+                self.tmodel_.T_ref_C_ = self.T_ref_C_
+                spans, note = self.tmodel_.offered_spans(bins)
+                notes += [note] if note else []
+                cands += [Candidate(f"temperature: {c.name}", ("T", c.key), c.var_names, c.exponents,
+                                    {"temperature_model": True, **c.settings})
+                          for c in self.tmodel_.candidates(spans)]
+            base = {c.key: self._base(record, bins, c.key) for c in cands}
+            folds = chained_folds(bins, self.n_folds, self.min_train_fraction, by_segment=sampling["bursty"])
+            yb = bins.mean(rate_error(record))
+            rv = [bins.mean(record["temperature_C"]) - self.T_ref_C_]
+            if self.die_source_ == "drive_frequency_Hz":
+                rv.append(self._aux_base(record, bins, self.smoothing_s[0])[:, 1])
+            sel = select(cands, base, yb, bins.counts, folds, bins.t_s, self.rule, range_vars=np.column_stack(rv),
+                         blocks=time_blocks(bins, 8, sampling["bursty"]))
+            self.key_ = sel.chosen.key
+            self.model_ = sel.chosen.model().fit(base[self.key_], yb, bins.counts)
+            if self.key_[0] == "T":
+                self.tmodel_.span_, self.tmodel_.model_ = self.key_[1], self.model_
+                notes.append("the validation chose a temperature model: the auxiliary channels did not "
+                             "forecast the drift better than temperature_C on the training record")
+        self.terms_ = self.model_.terms
         self.diagnostics_ = {
-            "method": self.method_name, "terms": ["1"] + list(self.terms_),
-            "coef_dps_per_sd": self.coef_.tolist(), "fallback_temperature_only": self.fallback_,
-            "channels_used": list(self.channels_), "channels_missing": missing,
-            "die_temperature_source": self.die_source_,
-            "drive_frequency_tc_Hz_per_K": getattr(self, "kf_Hz_per_K_", None),
-            "fit_residual_rms_1s_dph": float(np.sqrt(np.mean(resid ** 2)) * 3600.0),
-            "condition_number": float(np.linalg.cond(A)), "bins_1s": len(yb),
-            "agc_r2_on_die_temperature": self.agc_r2_,
-            "filter_time_constant_s": 0.0, "correction_smoothing_s": float(self.smooth_s),
-            "notes": notes,
-        }
+            "method": self.method_name, "terms": list(self.terms_), "coef": self.model_.coefficients(),
+            "selection": sel.report(), "fallback_temperature_only": self.fallback_,
+            "model_family": "temperature" if self.key_[0] == "T" else "auxiliary channels",
+            "channels_used": list(self.channels_) if self.key_[0] == "aux" else ["temperature_C"],
+            "channels_missing": missing, "die_temperature_source": self.die_source_,
+            "drive_frequency_tc_Hz_per_K": self.kf_Hz_per_K_, "drive_frequency_tc_source": kf_source,
+            "agc_r2_on_die_temperature": self.agc_r2_, "sampling": describe(t),
+            "condition_number": self.model_.condition_number_, "bins_1s": len(bins),
+            "filter_time_constant_s": 0.0,
+            "correction_smoothing_s": self.key_[1] if self.key_[0] == "aux" else self.key_[1] or 0.0,
+            "beyond_training_range": {"continuation": self.model_.continuation, "held": list(self.model_.held)},
+            "notes": notes + sel.notes}
         return self
 
-    def transform(self, record: Record) -> np.ndarray:
+    def compensate_rate_dps(self, record: Record) -> np.ndarray:
         """Rate with the predicted drift subtracted (signal path untouched), in deg/s.
 
         Parameters
@@ -246,16 +334,33 @@ class PhysicsCompensator(Compensator):
         Returns
         -------
         ndarray
+            ``transform_diagnostics_["extrapolation"]`` says which regressors left the training
+            box and by how much.
         """
-        check_record(record, need_uniform=False, min_samples=2, method=self.method_name)
+        check_is_fitted(self, "model_")
+        check_record(record, need_uniform=False, min_samples=1, method=self.method_name, allow_missing=True)
+        full, (record, keep, gap_note) = record, complete_rows(record)
         avail = self._available(record)
-        need = [] if self.fallback_ else list(self.channels_)
+        need = list(self.channels_) if self.key_[0] == "aux" else []
         lacking = [c for c in need if not avail[c]]
         if lacking:
             raise InputError(f"channel(s) {', '.join(lacking)} missing or incomplete, but the physics model "
                              "was fitted with them; refit on a record without them (temperature fallback)",
                              record.path or "record")
-        return record["rate_dps"] - self.drift(record)
+        bins = make_bins(record.time_s)
+        X = self._base(record, bins, self.key_)
+        ex = self.model_.extrapolation(X, bins.counts, AUX_UNITS)
+        ex["summary"] = summarise_extrapolation(ex)
+        off = self.model_.off_data(X)[0]
+        if off.any():
+            ex["off_training_data_fraction"] = float(bins.counts[off].sum() / bins.counts.sum())
+            ex["summary"] += (f"; there ({100 * ex['off_training_data_fraction']:.0f} % of the record) the model takes "
+                              "its value at the training point nearest in its regressors, continued from there")
+        self.transform_diagnostics_ = {"extrapolation": ex, "sampling": describe(record.time_s),
+                                       "filter_time_constant_s": 0.0, "notes": [gap_note] if gap_note else []}
+        out = np.full(len(full), np.nan)
+        out[keep] = record["rate_dps"] - bins.to_samples(record.time_s, self.model_.predict(X))
+        return out
 
     def drift(self, record: Record) -> np.ndarray:
         """The predicted drift in deg/s on the record's time base.
@@ -268,8 +373,9 @@ class PhysicsCompensator(Compensator):
         -------
         ndarray
         """
-        tb, Xs = self._design(record)
-        pred_b = self.coef_[0] + Xs @ self.coef_[1:]
-        if len(tb) == 1:
-            return np.full(len(record), pred_b[0])
-        return np.interp(record.time_s, tb, pred_b)
+        check_is_fitted(self, "model_")
+        full, (record, keep, _) = record, complete_rows(record)
+        bins = make_bins(record.time_s)
+        out = np.full(len(full), np.nan)
+        out[keep] = bins.to_samples(record.time_s, self.model_.predict(self._base(record, bins, self.key_)))
+        return out

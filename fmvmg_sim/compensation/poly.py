@@ -1,23 +1,33 @@
-"""The ``poly-baseline`` compensator and the thermal regressors every method shares.
+"""The temperature-model compensators ``poly-baseline``, ``line`` and ``bias``, and the record checks every method shares.
 
-Model of the rate error (rate_dps - rate_true_dps, the truth taken as 0 when absent):
-b + a1 dT + a2 dT^2 + c dT/dt, by ordinary least squares on training data, evaluated on
-1 s bin means (compensation.md: regressors at 1 Hz). Temperature is smoothed over 60 s
-before dT/dt is taken. Works on uneven time steps (gaps): bins and derivatives use the
-actual times.
+``poly-baseline`` models the rate error (``rate_dps - rate_true_dps``, the truth taken as 0
+when absent: a static record) by the selected temperature model of :mod:`.thermal_model`: a
+polynomial of order 0-3 in T, with or without a dT/dt term, chosen by forward-chained
+validation on the training record, fitted on 1 s bin means, continued along its tangent
+beyond the training temperature range. ``line`` (a straight line in T) and ``bias`` (a
+constant) are the fixed baselines every other method is compared with. All three handle gaps
+and records of bursts: bins, derivatives and validation folds stay inside the stretches
+between gaps.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
+from sklearn.utils.validation import check_is_fitted
 
 from ..errors import InputError
 from ..record import Record
 from .base import Compensator, register
+from .segments import describe
+from .thermal_model import DTDT_SMOOTHING_S, ORDERS, TemperatureModel
 
 
-def check_record(record: Record, need_uniform: bool, min_samples: int = 16, method: str = "") -> None:
+#: Channels every compensator reads.
+NEEDED = ("time_s", "temperature_C", "rate_dps")
+
+
+def check_record(record: Record, need_uniform: bool, min_samples: int = 16, method: str = "",
+                 allow_missing: bool = False) -> None:
     """Refuse a record a compensator cannot use (raises :class:`InputError`).
 
     Parameters
@@ -27,34 +37,71 @@ def check_record(record: Record, need_uniform: bool, min_samples: int = 16, meth
     need_uniform : bool
         Whether the method needs even time steps (no gaps).
     min_samples : int
-        Fewest rows accepted.
+        Fewest (complete) rows accepted.
     method : str
         Method name for the message.
+    allow_missing : bool
+        Accept rows with a missing ``temperature_C`` or ``rate_dps`` (a method that treats
+        them as gaps, see :func:`complete_rows`).
 
     Raises
     ------
     InputError
-        Missing or non-finite ``temperature_C``/``rate_dps``, too few rows, or gaps when
-        ``need_uniform``.
+        A missing column, missing samples (unless ``allow_missing``), too few rows, or gaps
+        when ``need_uniform``.
     """
     where = record.path or "record"
-    for col in ("time_s", "temperature_C", "rate_dps"):
+    ok = np.ones(len(record), dtype=bool)
+    for col in NEEDED:
         if col not in record:
             raise InputError(f"column {col!r} is required by compensation method {method!r}", where)
         bad = np.flatnonzero(~np.isfinite(record[col]))
-        if bad.size:
+        if bad.size and (not allow_missing or col == "time_s"):
             raise InputError(f"{col} has {bad.size} missing/NaN samples (first at data row {bad[0] + 1}); "
-                             f"compensation method {method!r} needs complete channels", where)
-    if len(record) < min_samples:
-        raise InputError(f"record has {len(record)} rows; method {method!r} needs at least {min_samples}", where)
+                             f"compensation method {method!r} needs complete channels (poly-baseline, line, "
+                             "bias and physics treat rows with a missing rate or temperature as gaps)", where)
+        ok &= np.isfinite(record[col])
+    if ok.sum() < min_samples:
+        raise InputError(f"record has {int(ok.sum())} complete rows; method {method!r} needs at least "
+                         f"{min_samples}", where)
     if need_uniform:
         dt = np.diff(record.time_s)
         med = np.median(dt)
         off = np.flatnonzero(np.abs(dt - med) > 1e-3 * med)
         if off.size:
-            raise InputError(f"time_s has uneven steps (gap after t={record.time_s[off[0]]:g} s: step "
-                             f"{dt[off[0]]:g} s vs nominal {med:g} s); method {method!r} needs even "
-                             "sampling (use poly-baseline, or resample the record)", where)
+            s = describe(record.time_s)
+            what = (f"the record is made of {s['segments']} bursts of about {s['median_segment_s']:.3g} s every "
+                    f"{s['median_segment_s'] + s['median_gap_s']:.3g} s" if s["bursty"] else
+                    f"time_s has uneven steps (gap after t={record.time_s[off[0]]:g} s: step {dt[off[0]]:g} s "
+                    f"vs nominal {med:g} s)")
+            raise InputError(f"{what}; method {method!r} needs even, continuous sampling (use poly-baseline, "
+                             "line, bias or physics, which handle gaps and bursts)", where)
+
+
+def complete_rows(record: Record) -> tuple[Record, np.ndarray, str | None]:
+    """The rows whose ``time_s``, ``temperature_C`` and ``rate_dps`` are all known.
+
+    The rows left out become gaps for the methods that handle gaps (bins and derivatives do not
+    straddle them); their compensated output is missing.
+
+    Parameters
+    ----------
+    record : Record
+
+    Returns
+    -------
+    (Record, ndarray of bool, str or None)
+        The complete rows, the mask of them, and a note when rows were left out.
+    """
+    keep = np.ones(len(record), dtype=bool)
+    for col in NEEDED:
+        keep &= np.isfinite(record[col])
+    if keep.all():
+        return record, keep, None
+    first = int(np.flatnonzero(~keep)[0]) + 1
+    return (record.slice(keep), keep,
+            f"{int((~keep).sum())} rows with a missing rate or temperature (first at data row {first}) treated as "
+            "gaps; their compensated rate is missing")
 
 
 def rate_error(record: Record) -> np.ndarray:
@@ -75,116 +122,41 @@ def rate_error(record: Record) -> np.ndarray:
     return y.copy()
 
 
-def bin_means(t_s: np.ndarray, x: np.ndarray, width_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Means of ``x`` (and of time) over non-empty bins of ``width_s`` seconds.
-
-    Parameters
-    ----------
-    t_s : ndarray
-        Increasing times.
-    x : ndarray
-        Values.
-    width_s : float
-        Bin width.
-
-    Returns
-    -------
-    t_bin, x_bin : ndarray
-    """
-    idx = np.floor((t_s - t_s[0]) / width_s).astype(np.int64)
-    _, start, counts = np.unique(idx, return_index=True, return_counts=True)
-    return np.add.reduceat(t_s, start) / counts, np.add.reduceat(x, start) / counts
-
-
-def thermal_features(t_s: np.ndarray, T_C: np.ndarray, T_ref_C: float, smooth_s: float = 60.0,
-                     presmoothed: bool = False) -> np.ndarray:
-    """Regressors [dT, dT^2, dT/dt in degC/min] on the time base ``t_s``.
-
-    Parameters
-    ----------
-    t_s : ndarray
-        Times (gaps allowed).
-    T_C : ndarray
-        Temperature readings, or a trend when ``presmoothed``.
-    T_ref_C : float
-        Reference temperature of dT.
-    smooth_s : float
-        Moving-average span applied to 1 s bin means before differentiating.
-    presmoothed : bool
-        ``T_C`` is already a smooth trend (skip the moving average).
-
-    Returns
-    -------
-    ndarray, shape (len(t_s), 3)
-    """
-    tb, Tb = bin_means(t_s, T_C, 1.0)
-    if not presmoothed and len(Tb) > 2:
-        Tb = uniform_filter1d(Tb, max(1, min(int(smooth_s), len(Tb))), mode="nearest")
-    dTdt = np.gradient(Tb, tb) * 60.0 if len(Tb) > 1 else np.zeros_like(Tb)
-    if not presmoothed and len(Tb) > 2:
-        dTdt = uniform_filter1d(dTdt, max(1, min(int(smooth_s), len(Tb))), mode="nearest")
-    dT = np.interp(t_s, tb, Tb) - T_ref_C
-    return np.column_stack([dT, dT * dT, np.interp(t_s, tb, dTdt)])
-
-
-def fit_ols(X: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Least-squares coefficients of ``y`` on ``[1, X]``.
-
-    Parameters
-    ----------
-    X : ndarray, shape (n, p)
-        Regressors.
-    y : ndarray, shape (n,)
-        Target.
-
-    Returns
-    -------
-    ndarray, shape (p + 1,)
-        Intercept first.
-    """
-    A = np.column_stack([np.ones(len(X)), X])
-    return np.linalg.lstsq(A, y, rcond=None)[0]
-
-
-@register("poly-baseline")
-class PolyBaseline(Compensator):
-    """Least squares on [1, dT, dT^2, dT/dt] fitted on training data; handles gaps.
-
-    Parameters
-    ----------
-    smooth_s : float
-        Temperature smoothing span before the derivative, in s.
-    """
+class _TemperatureCompensator(Compensator):
+    """Shared fit/transform of the compensators built on :class:`.thermal_model.TemperatureModel`."""
 
     handles_gaps = True
 
-    def __init__(self, smooth_s: float = 60.0):
-        self.smooth_s = smooth_s
+    def _model(self) -> TemperatureModel:
+        return TemperatureModel(self.orders, self.dtdt_smoothing_s, self.rule, self.n_folds,
+                                self.min_train_fraction, continuation=self.continuation)
 
-    def fit(self, record: Record) -> "PolyBaseline":
-        """Fit the coefficients on a training record.
+    def fit(self, record: Record) -> "_TemperatureCompensator":
+        """Choose and fit the temperature model on a training record.
 
         Parameters
         ----------
         record : Record
-            Training data.
+            Training data (``rate_true_dps`` used where known; a static run otherwise).
 
         Returns
         -------
-        PolyBaseline
-            ``self`` with ``T_ref_C_`` and ``coef_`` (intercept, dT, dT^2, dT/dt; deg/s units).
+        self
+            With ``model_`` (the fitted :class:`.thermal_model.TemperatureModel`), ``coef_``
+            (``{term: deg/s per unit}``), ``T_ref_C_`` and ``diagnostics_`` (the selection with
+            every option's validation score).
         """
-        check_record(record, need_uniform=False, method=self.method_name)
-        t = record.time_s
-        self.T_ref_C_ = float(np.mean(record["temperature_C"]))
-        X = thermal_features(t, record["temperature_C"], self.T_ref_C_, self.smooth_s)
-        Xb = np.column_stack([bin_means(t, X[:, k])[1] for k in range(X.shape[1])])
-        self.coef_ = fit_ols(Xb, bin_means(t, rate_error(record))[1])
-        self.diagnostics_ = {"coef_dps": self.coef_.tolist(), "T_ref_C": self.T_ref_C_, "bins_1s": len(Xb)}
+        check_record(record, need_uniform=False, method=self.method_name, allow_missing=True)
+        rec, _, note = complete_rows(record)
+        self.model_ = self._model().fit(rec.time_s, rec["temperature_C"], rate_error(rec))
+        self.T_ref_C_ = self.model_.T_ref_C_
+        self.coef_ = self.model_.model_.coefficients()
+        self.diagnostics_ = {"method": self.method_name, **self.model_.report(), "filter_time_constant_s": 0.0,
+                             "notes": self.model_.selection_.notes + ([note] if note else [])}
         return self
 
-    def transform(self, record: Record) -> np.ndarray:
-        """Rate with the fitted thermal error model subtracted, in deg/s.
+    def compensate_rate_dps(self, record: Record) -> np.ndarray:
+        """Rate with the fitted temperature model subtracted, in deg/s.
 
         Parameters
         ----------
@@ -194,7 +166,58 @@ class PolyBaseline(Compensator):
         Returns
         -------
         ndarray
+            ``transform_diagnostics_["extrapolation"]`` says whether and how far the record left
+            the training range.
         """
-        check_record(record, need_uniform=False, method=self.method_name)
-        X = thermal_features(record.time_s, record["temperature_C"], self.T_ref_C_, self.smooth_s)
-        return record["rate_dps"] - (self.coef_[0] + X @ self.coef_[1:])
+        check_is_fitted(self, "model_")
+        check_record(record, need_uniform=False, min_samples=1, method=self.method_name, allow_missing=True)
+        rec, keep, note = complete_rows(record)
+        t, T = rec.time_s, rec["temperature_C"]
+        self.transform_diagnostics_ = {"extrapolation": self.model_.extrapolation(t, T),
+                                       "sampling": describe(t), "filter_time_constant_s": 0.0,
+                                       "notes": [note] if note else []}
+        out = np.full(len(record), np.nan)
+        out[keep] = rec["rate_dps"] - self.model_.predict(t, T)
+        return out
+
+
+@register("poly-baseline")
+class PolyBaseline(_TemperatureCompensator):
+    """Polynomial in T (order 0-3) with or without dT/dt, chosen by forward-chained validation.
+
+    Parameters
+    ----------
+    orders : tuple of int, optional
+        Polynomial orders to choose from.
+    dtdt_smoothing_s : tuple of float or None, optional
+        dT/dt smoothing spans to choose from, in s; None stands for "no dT/dt term".
+    rule : {"best", "one-se"}, optional
+        The simplest structure within one standard error of the best validation score, or the
+        best score.
+    n_folds : int, optional
+        Forward-chained validation folds.
+    min_train_fraction : float, optional
+        Fraction of the training record the first fold of each direction is fitted on.
+    continuation : {"auto", "tangent", "constant"}, optional
+        Beyond the training temperature range: held constant or continued along the tangent
+        as the validation's forecasts beyond their fitted range support (``"auto"``), or fixed.
+    """
+
+    def __init__(self, orders=ORDERS, dtdt_smoothing_s=DTDT_SMOOTHING_S, rule="best", n_folds=4,
+                 min_train_fraction=0.5, continuation="auto"):
+        self.orders, self.dtdt_smoothing_s, self.rule = orders, dtdt_smoothing_s, rule
+        self.n_folds, self.min_train_fraction, self.continuation = n_folds, min_train_fraction, continuation
+
+
+@register("line")
+class LineInT(_TemperatureCompensator):
+    """A straight line in T (bias and one temperature coefficient): the baseline to beat."""
+
+    orders, dtdt_smoothing_s, rule, n_folds, min_train_fraction, continuation = (1,), (None,), "best", 4, 0.5, "tangent"
+
+
+@register("bias")
+class BiasOnly(_TemperatureCompensator):
+    """A constant bias from the training record (a plain bias calibration)."""
+
+    orders, dtdt_smoothing_s, rule, n_folds, min_train_fraction, continuation = (0,), (None,), "best", 4, 0.5, "tangent"

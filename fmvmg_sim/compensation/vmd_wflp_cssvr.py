@@ -58,11 +58,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from sklearn.utils.validation import check_is_fitted
+
 from ..errors import InputError
 from ..record import Record
 from .base import Compensator, register
 from .cssvr import CSSVR, temperature_features
-from .poly import bin_means, check_record, rate_error
+from .poly import check_record, rate_error
+from .selection import box_extrapolation
+from .thermal_model import TemperatureModel
 from .sampen import CLASS_NAMES, DRIFT, MIXED, NOISE
 from .vmd import vmd
 from .vmd_classes import DRIFT_SE_MAX, NOISE_SE_MIN, classify_modes, mode_entropies
@@ -71,6 +75,8 @@ from .wflp import wflp
 #: Fewest samples accepted (WFLP at level 4 with db4, 5-fold time-series CV).
 MIN_SAMPLES = 256
 RESIDUAL_POLICIES = ("keep", "wflp", "drop")
+#: Names of the CS-SVR's candidate inputs (columns of :func:`.cssvr.temperature_features`).
+INPUT_NAMES = ("temperature_C", "dTdt_C_per_min")
 CARRY_BACK_POLICIES = ("all", "drift")
 
 
@@ -137,7 +143,8 @@ class VMDWFLPCSSVR(Compensator):
         return res, cls, groups, diag
 
     def _features(self, record: Record) -> np.ndarray:
-        return temperature_features(record.time_s, record["temperature_C"], self.smooth_s)
+        X = temperature_features(record.time_s, record["temperature_C"], self.smooth_s)
+        return X[:, list(self.input_cols_)]
 
     # -- decimation ---------------------------------------------------------------------------
     def _block(self, record: Record) -> int:
@@ -188,7 +195,7 @@ class VMDWFLPCSSVR(Compensator):
                                       "n_samples_full_rate": len(record)})
         return self
 
-    def transform(self, record: Record) -> np.ndarray:
+    def compensate_rate_dps(self, record: Record) -> np.ndarray:
         """Compensated rate in deg/s at the record's own rate -- see :meth:`_transform_native`.
 
         Parameters
@@ -202,6 +209,7 @@ class VMDWFLPCSSVR(Compensator):
             With decimation: ``rate_dps`` minus the low-rate correction interpolated to the full
             time base (the band above the low rate's Nyquist frequency passes unchanged).
         """
+        check_is_fitted(self, "block_")
         self._check_policy()
         m = self._block(record)
         if m == 1:
@@ -266,7 +274,20 @@ class VMDWFLPCSSVR(Compensator):
         _, cls, groups, diag = self._decompose(rate_error(record), fs)
         self.svr_, self.C_, self.sigma_ = None, None, None
         diag.update({"method": self.method_name, "fs_Hz": fs, "n_samples": len(record)})
+        self.input_cols_ = (0, 1)
         if np.any(cls == DRIFT):
+            # inputs chosen by forward-chained validation of the linear temperature models on the
+            # drift modes: dT/dt enters the SVR only when it improves their forecast
+            sel = TemperatureModel(dtdt_smoothing_s=(None, self.smooth_s)).fit(
+                record.time_s, record["temperature_C"], groups[DRIFT])
+            self.input_cols_ = (0,) if sel.span_ is None else (0, 1)
+            rep = sel.selection_.report()
+            diag["selection"] = {**rep, "chosen": "CS-SVR on " + " and ".join(INPUT_NAMES[c] for c in self.input_cols_),
+                                 "chosen_settings": {"inputs": [INPUT_NAMES[c] for c in self.input_cols_],
+                                                     "continuation": "tangent"},
+                                 "linear_model_chosen": rep["chosen"],
+                                 "note": "the linear temperature models' selection on the drift modes decides "
+                                         "whether dT/dt enters the CS-SVR; C and sigma are the cuckoo search's"}
             self.svr_ = CSSVR(search=self.search, budget=self.budget, n_nests=self.n_nests,
                               n_max=self.n_max, seed=self.seed, progress=self.progress).fit(
                 self._features(record), groups[DRIFT])
@@ -274,7 +295,9 @@ class VMDWFLPCSSVR(Compensator):
             diag["cssvr"] = {"C": self.C_, "sigma": self.sigma_, "cv_rmse_dps": self.svr_.cv_rmse_,
                              "search": self.search, "nfev": self.svr_.search_result_.nfev,
                              "budget": self.budget, "epsilon_dps": self.svr_.epsilon_,
-                             "inputs": ["temperature_C", "dTdt_C_per_min"], "n_points": self.svr_.n_points_}
+                             "inputs": [INPUT_NAMES[c] for c in self.input_cols_], "n_points": self.svr_.n_points_,
+                             "beyond_training_range": "continued along the tangent plane at the edge of the "
+                                                      "training box"}
         else:
             diag["cssvr"] = "not fitted: the training decomposition has no drift mode"
         self.fit_diagnostics_ = diag
@@ -302,8 +325,15 @@ class VMDWFLPCSSVR(Compensator):
         subtracted = bool(np.any(cls == DRIFT) and self.svr_ is not None)
         self._drift_pred_ = None
         if subtracted:
-            self._drift_pred_ = self.svr_.predict(self._features(record))
+            X = self._features(record)
+            self._drift_pred_ = self.svr_.predict(X)
             drift = drift - self._drift_pred_
+            names = [INPUT_NAMES[c] for c in self.input_cols_]
+            v = box_extrapolation(names, X, self.svr_.lo_, self.svr_.hi_,
+                                  units={"temperature_C": "degC", "dTdt_C_per_min": "K/min"})
+            out = [n for n in names if v[n]["below"] > 0 or v[n]["above"] > 0]
+            diag["extrapolation"] = {"variables": v, "terms_extrapolated": out, "any": bool(out),
+                                     "terms_continued_linearly": out}
         residual = {"keep": res.residual, "drop": np.zeros_like(res.residual),
                     "wflp": wflp(res.residual, **kw)}[self.residual]
         diag.update({"residual_policy": self.residual, "drift_model_subtracted": subtracted,

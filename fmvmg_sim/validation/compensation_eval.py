@@ -57,7 +57,7 @@ from ..scenario import load_scenario
 #: Name of the uncompensated output in method lists.
 RAW = "raw"
 #: Methods of the full comparison, in table order.
-ALL_METHODS = (RAW, "poly-baseline", "emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "physics")
+ALL_METHODS = (RAW, "line", "poly-baseline", "emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr", "physics")
 #: Frequencies of the bandwidth check, Hz.
 BANDWIDTH_FREQS_HZ = (1.0, 10.0, 50.0)
 #: Honest bias instability is read at tau >= this factor x the filter time constant.
@@ -257,11 +257,11 @@ def filter_time_constant(method: str, comp) -> tuple[float, str]:
     Returns
     -------
     (float, str)
-        The time constant and where it came from. Methods that publish
-        ``filter_time_constant_s`` in their diagnostics are taken at their word; for the
-        EMD methods it is derived here from their diagnostics: 1 / (2 pi f_c) of the Kalman
-        filter, (mean period) / (2 pi) of the longest dropped noise IMF, and the RBF's
-        embedding window (2 d + 1) / fs; 0 for raw and the poly baseline (a subtraction).
+        The time constant and where it came from. Every method publishes
+        ``filter_time_constant_s`` in its diagnostics and is taken at its word (the EMD methods
+        derive it from what they drop and filter: the Kalman filter's 1 / (2 pi f_c), the
+        longest dropped noise IMF's mean period / (2 pi), the RBF's embedding window); 0 for raw
+        and for the methods that subtract a correction.
     """
     if comp is None:
         return 0.0, "raw output"
@@ -269,25 +269,6 @@ def filter_time_constant(method: str, comp) -> tuple[float, str]:
         d = getattr(comp, attr, None) or {}
         if isinstance(d, dict) and d.get("filter_time_constant_s") is not None:
             return float(d["filter_time_constant_s"]), f"{attr}['filter_time_constant_s']"
-    if method.startswith("emd-rbf"):
-        d = dict(getattr(comp, "fit_diagnostics_", {}) or {})
-        d.update(getattr(comp, "transform_diagnostics_", {}) or {})
-        fs = float(d.get("fs_Hz") or 1.0)
-        tcs = {}
-        periods = d.get("mean_period_s") or []
-        classes = d.get("classes") or []
-        noise = [p for p, c in zip(periods, classes) if c == "noise" and np.isfinite(p)]
-        if noise:
-            tcs["dropped noise IMFs"] = max(noise) / (2 * math.pi)
-        if d.get("rbf_applied"):
-            tcs["RBF embedding"] = (2 * getattr(comp, "delay", 4) + 1) / fs / (2 * math.pi)
-        kf = d.get("kf")
-        if d.get("kf_applied") and isinstance(kf, dict) and kf.get("cutoff_Hz"):
-            tcs["Kalman filter"] = 1.0 / (2 * math.pi * float(kf["cutoff_Hz"]))
-        if tcs:
-            k = max(tcs, key=tcs.get)
-            return float(tcs[k]), f"derived: {k} ({', '.join(f'{n} {v:.3g} s' for n, v in tcs.items())})"
-        return 0.0, "derived: nothing dropped or filtered"
     return 0.0, "assumed 0: the method subtracts a correction and publishes no filter"
 
 
@@ -466,12 +447,12 @@ def _apply(method: str, train: Record, test: Record, seed: int, params: dict | N
         if shared:
             try:
                 comp.fit(train, _decomp=decomp.get(comp, train, "error"))
-                out = np.asarray(comp.transform(test, _decomp=decomp.get(comp, test, "rate")), dtype=float)
+                out = np.asarray(comp.compensate_rate_dps(test, _decomp=decomp.get(comp, test, "rate")), dtype=float)
                 return out, comp, time.perf_counter() - t0
             except TypeError:
                 comp = _make(method, seed, params)
         comp.fit(train)
-        out = np.asarray(comp.transform(test), dtype=float)
+        out = np.asarray(comp.compensate_rate_dps(test), dtype=float)
     return out, comp, time.perf_counter() - t0
 
 
@@ -591,15 +572,10 @@ def evaluate(methods=ALL_METHODS, seeds: int = 5, quick: bool = False, effects: 
                                   **{k: v for k, v in allan.items() if k not in ("taus_s", "adev_dph")},
                                   **truth_figures(test, out)})
                     if comp is not None:
-                        d = getattr(comp, "transform_diagnostics_", None) or getattr(comp, "diagnostics_", None)
-                        if isinstance(d, dict):
-                            entry["diagnostics"] = {k: d[k] for k in ("classes", "n_modes", "drift_model_subtracted",
-                                                                      "fallback_temperature_only", "terms",
-                                                                      "decimated_to_Hz", "kf_applied", "n_imfs")
-                                                    if k in d}
+                        entry["diagnostics"] = run_diagnostics(comp)
                     if in_sample:
                         out_in = (np.asarray(train["rate_dps"], float) if comp is None
-                                           else np.asarray(comp.transform(train), float))
+                                           else np.asarray(comp.compensate_rate_dps(train), float))
                         a_in = allan_figures(out_in, 1.0 / train.sample_interval_s(), tf)
                         entry["in_sample"] = {k: a_in[k] for k in ("N_paper_dph_rtHz", "N_paper_deg_rt_h",
                                                                    "B_paper_dph")}
@@ -637,6 +613,33 @@ def evaluate(methods=ALL_METHODS, seeds: int = 5, quick: bool = False, effects: 
                       "simulation_wall_s": cache.sim_wall_s})
     ev.summary = summarise(ev)
     return ev
+
+
+def run_diagnostics(comp) -> dict:
+    """The few diagnostics of a fitted-and-applied compensator kept per run: what it chose and did.
+
+    Parameters
+    ----------
+    comp : Compensator
+
+    Returns
+    -------
+    dict
+    """
+    out = {}
+    fit = getattr(comp, "fit_diagnostics_", None) or getattr(comp, "diagnostics_", None) or {}
+    tr = getattr(comp, "transform_diagnostics_", None) or {}
+    for d in (fit, tr):
+        out.update({k: d[k] for k in ("classes", "n_modes", "drift_model_subtracted", "fallback_temperature_only",
+                                      "terms", "decimated_to_Hz", "kf_applied", "n_imfs") if k in d})
+    sel = comp.selection_report()
+    if sel:
+        out["chosen"] = sel["chosen"]
+        out["continuation"] = (sel.get("chosen_settings") or {}).get("continuation")
+    ex = tr.get("extrapolation")
+    if ex:
+        out["extrapolated"] = bool(ex.get("any"))
+    return out
 
 
 def _rate_window(rt: Record, out: np.ndarray) -> dict:
@@ -763,6 +766,41 @@ def markdown_table(ev: Evaluation) -> str:
     lines += ["", f"Mean ± SD over {c['seeds']} seeds × {len(c['directions'])} directions "
               f"({', '.join(c['directions'])}) for held-out figures, over {c['seeds']} seeds for bandwidth. "
               f"Effects on: {c['effects']}."]
+    return "\n".join(lines) + "\n"
+
+
+#: The papers' own figures of their methods, read their way (paper 000 Table 2: N in deg/h/sqrt(Hz), B in
+#: deg/h; paper 004: ARW in deg/sqrt(h), B in deg/h), by the project's method name.
+PAPER_FIGURES = {
+    "paper 000, Table 2": ("N", {RAW: (99.608, 34.66), "emd-rbf": (99.6037, 28.42), "emd-rbf-ga": (99.6011, 23.65),
+                                 "emd-rbf-ga-kf": (0.967814, 3.589)}),
+    "paper 004": ("ARW", {RAW: (1.667, 30.0), "vmd-wflp-cssvr": (0.0667, 4.0)}),
+}
+
+
+def papers_table(ev: Evaluation) -> str:
+    """The papers' figures beside ours read the papers' way, as Markdown.
+
+    Parameters
+    ----------
+    ev : Evaluation
+
+    Returns
+    -------
+    str
+    """
+    S = ev.summary
+    lines = ["| | paper's own | ours, paper's way (held-out, mean ± SD) | slope of the Allan curve at τ = 1 s (ours) |",
+             "|---|---|---|---|"]
+    for paper, (kind, rows) in PAPER_FIGURES.items():
+        unit = "N in deg/h/√Hz" if kind == "N" else "ARW in deg/√h"
+        lines.append(f"| **{paper}** ({unit}, B in deg/h) | | | |")
+        for m, (n, b) in rows.items():
+            if m not in S:
+                continue
+            key = "N_paper_dph_rtHz" if kind == "N" else "N_paper_deg_rt_h"
+            lines.append(f"| `{m}` | {kind} {n:g}, B {b:g} | {kind} {_fmt(S[m][key])}, B {_fmt(S[m]['B_paper_dph'])} | "
+                         f"{_fmt(S[m]['slope_at_1s'], '+.2f')} |")
     return "\n".join(lines) + "\n"
 
 
