@@ -3,7 +3,6 @@
 Usage::
 
     python benchmarks/real_records.py [--data ../shared/data] [--methods M,...] [--json OUT.json] [--independent]
-                                      [--docs docs/compensation_results.md]
 
 Each measured record is fitted on its first half in time and applied to its second half, and
 the reverse; records of the same sensor and axis at temperatures that do not overlap (the
@@ -12,8 +11,9 @@ a bias calibration from the training part (1 = no better than a bias calibration
 the record's white noise, which no drift model can remove), and the target check: the default
 method (``poly-baseline``) against the better of a line in T and the selected polynomial
 (:mod:`fmvmg_sim.validation.compensation_records`). Without ``--data`` it reads the shared data
-folder beside the repository if there is one, else the copies in ``tests/data``. ``--docs``
-replaces the generated table of the documentation page with what was measured.
+folder beside the repository if there is one, else the copies in ``tests/data``. The
+validation page (``python -m fmvmg_sim.validation.page``) carries the same table for the records in
+``tests/data``.
 """
 
 from __future__ import annotations
@@ -39,22 +39,17 @@ def default_data_dir() -> Path:
 
 def main(argv=None) -> int:
     from fmvmg_sim.validation import compensation_records as R
-    from fmvmg_sim.validation.doc_blocks import replace_block
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=None, help="shared data folder (default: see above)")
     ap.add_argument("--methods", default=",".join(R.METHODS), help="comma-separated methods")
     ap.add_argument("--json", type=Path, help="also write every figure to this JSON file")
-    ap.add_argument("--docs", type=Path, help="also replace the generated real-records block of this page "
-                    "(docs/compensation_results.md); only with the default methods and without --independent")
     ap.add_argument("--independent", action="store_true",
                     help="also run on independent-dev, the records of an independent generator (slow: hours-long "
                          "records, every method)")
     a = ap.parse_args(argv)
     data = a.data or default_data_dir()
     methods = [m.strip() for m in a.methods.split(",") if m.strip()]
-    if a.docs and (a.independent or tuple(methods) != tuple(R.METHODS)):
-        ap.error("--docs writes the page's table: give it with every method and without --independent")
     records, skipped = R.load_records(data, independent=a.independent)
     cases = R.make_cases(records)
     t0 = time.perf_counter()
@@ -64,9 +59,6 @@ def main(argv=None) -> int:
           f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
     text = R.report(cases, skipped, methods)
     print(text)
-    if a.docs:
-        replace_block(a.docs, "real-records", text)
-        print(f"wrote the real-records block of {a.docs}", file=sys.stderr)
     if a.json:
         a.json.write_text(json.dumps(R.to_dict(cases, skipped), indent=1) + "\n")
     return 0

@@ -22,3 +22,13 @@ def test_a_section_is_measured_and_written_with_its_numbers(tmp_path):
 def test_bad_options_are_refused_before_measuring(argv, capsys):
     assert page.main(argv) == 2
     assert capsys.readouterr().err.strip()
+
+
+def test_the_compensation_section_holds_the_default_method_to_the_better_baseline():
+    """On the measured records the default method is within 1.05 x the better of a line in T and the
+    selected polynomial, and the section says where the line wins."""
+    sec = page.compensation_records(quick=True, log=lambda m: None)
+    assert sec.data["pairs"] >= 20
+    assert sec.data["default_within_1p05_of_best"] == sec.data["pairs"]
+    text = "\n".join(sec.lines)
+    assert "| record | fitted -> applied |" in text and ("line wins" in text) == (sec.data["line_wins"] > 0)

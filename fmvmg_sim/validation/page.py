@@ -31,6 +31,7 @@ from ..envelope.engine import run_envelope
 from ..jsonout import strict
 from ..record import atomic_write_text
 from ..scenario import load_scenario
+from . import compensation_records as R
 
 #: The source checkout this module sits in; its tests/data holds the outside reference data.
 REPO = Path(__file__).resolve().parents[2]
@@ -257,11 +258,33 @@ def noise(quick: bool = False, log=print) -> Section:
     return Section("Noise against paper 000", lines, data)
 
 
+def compensation_records(quick: bool = False, log=print) -> Section:
+    """Every compensator on the measured records of ``tests/data``, beside a bias calibration, a line in T and
+    the records' noise floor (:mod:`.compensation_records`)."""
+    records, skipped = R.load_records(REPO / "tests" / "data")
+    cases = R.make_cases(records)
+    methods = ("poly-baseline", "physics", "line") if quick else R.METHODS
+    for c in cases:
+        log(f"compensation: {c.record}, {c.direction}")
+        R.evaluate_case(c, methods)
+    lines = ["Held-out RMS of the compensated rate divided by the RMS a bias calibration from the training part "
+             "leaves (1 = no better than a bias calibration); `floor` is the test part's deviation from its own "
+             "5 s means, what a perfect drift model would still leave. Each record is fitted on its first half in "
+             "time and applied to its second, and the reverse; records of one sensor and axis at temperatures that "
+             "do not overlap are also crossed. The records and their provenance are in `tests/data`.", "",
+             R.report(cases, skipped, methods).rstrip("\n")]
+    checks = [R.target_check(c) for c in cases]
+    data = {"pairs": len(cases), "default_within_1p05_of_best": sum(bool(t["ok"]) for t in checks),
+            "line_wins": sum(t["winner"] == "line" for t in checks), **R.to_dict(cases, skipped)}
+    return Section("Compensation on measured records", lines, data)
+
+
 #: The page's sections, in order: (key, function).
 SECTIONS: list[tuple[str, Callable]] = [
     ("allan", allan_references),
     ("engines", engines),
     ("noise", noise),
+    ("compensation", compensation_records),
 ]
 
 
