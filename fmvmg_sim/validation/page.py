@@ -260,7 +260,18 @@ def noise(quick: bool = False, log=print) -> Section:
 
 def compensation_records(quick: bool = False, log=print) -> Section:
     """Every compensator on the measured records of ``tests/data``, beside a bias calibration, a line in T and
-    the records' noise floor (:mod:`.compensation_records`)."""
+    the records' noise floor (:mod:`.compensation_records`).
+
+    Parameters
+    ----------
+    quick : bool, optional
+        Only the polynomial, physics and line (the decomposition methods refuse these records anyway).
+    log : callable, optional
+
+    Returns
+    -------
+    Section
+    """
     records, skipped = R.load_records(REPO / "tests" / "data")
     cases = R.make_cases(records)
     methods = ("poly-baseline", "physics", "line") if quick else R.METHODS
