@@ -11,12 +11,13 @@ carrier engine with it.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
 
-from .diagram import Diagram
+from .diagram import Diagram, build_diagram
 
 _NFFT = 256
 
@@ -334,3 +335,26 @@ def closed_form_scale_factor_V_per_dps(dg: Diagram) -> float:
     phi = np.arctan2(ws * w / dg.resonator.q_sense, ws ** 2 - w ** 2)  # mechanical sense phase
     sf_rad = lam * (k_sy / k_dx) * (np.pi / 2) * (dg.vref_V - dg.rectifier.offset_V) * g_dem / (2 * dw) * np.cos(phi)
     return float(sf_rad * np.pi / 180.0)
+
+
+_NOMINAL_SF: dict = {}
+
+
+def nominal_scale_factor_V_per_dps(device) -> float:
+    """The scale factor of ``device`` at its reference temperature (V per deg/s): the one that converts a
+    record's ``rate_V`` to ``rate_dps``. Cached by the device's values (a few steady states each).
+
+    Parameters
+    ----------
+    device : fmvmg_sim.device.Device
+
+    Returns
+    -------
+    float
+    """
+    key = json.dumps(device.values, sort_keys=True, default=repr)
+    if key not in _NOMINAL_SF:
+        if len(_NOMINAL_SF) > 64:
+            _NOMINAL_SF.clear()
+        _NOMINAL_SF[key] = scale_factor_V_per_dps(build_diagram(device, device.reference_temperature_C))
+    return _NOMINAL_SF[key]

@@ -11,7 +11,7 @@ def strict(obj):
     Parameters
     ----------
     obj : object
-        Nested dicts, lists, tuples, numbers (numpy scalars included) and strings.
+        Nested dicts, lists, tuples, numbers (numpy scalars and arrays included) and strings.
 
     Returns
     -------
@@ -21,6 +21,8 @@ def strict(obj):
         return {k: strict(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [strict(v) for v in obj]
+    if getattr(obj, "ndim", 0) > 0 and hasattr(obj, "tolist"):  # a numpy array
+        return strict(obj.tolist())
     if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
         obj = obj.item()
     if isinstance(obj, float) and not math.isfinite(obj):

@@ -22,6 +22,7 @@ from tqdm import tqdm
 from ..analysis.allan import allan_deviation
 from ..noise import quantize
 from ..profiles import PiecewiseProfile
+from ..uncertainty import apply_channels
 from .data import Prepared
 from .forward import CHANNELS, IQUAD, IRATE
 
@@ -45,7 +46,7 @@ NOT_COMPARABLE_Z = -10.0
 
 
 def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool = False,
-                 raw: list | None = None) -> list[dict]:
+                 raw: list | None = None, knobs: list | None = None, delay_s: float = 0.0) -> list[dict]:
     """Simulate the calibrated nominal model with noise on the record's inputs, once per device.
 
     Parameters
@@ -60,6 +61,12 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
     raw : list, optional
         When given, each replicate's quantised channels before the record's lattice is applied are appended
         to it.
+    knobs : list of dict, optional
+        Each replicate's knob values: its channels go through its channel knobs
+        (:func:`fmvmg_sim.uncertainty.apply_channels`), as the record's went through the calibrated ones.
+    delay_s : float, optional
+        How much later than the channels the record's temperature is read: the replicates run on the
+        temperature the record's channels saw.
 
     Returns
     -------
@@ -77,7 +84,8 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
     keep[steps] = True
     keep[np.minimum(steps + 1, len(keep) - 1)] = True
     tp = np.concatenate([[0.0], prep.t_s[keep]])
-    Tp = np.concatenate([[prep.case_at_t_C[0]], prep.case_at_t_C[keep]])
+    T_seen = np.interp(prep.t_s + delay_s, prep.t_s, prep.case_at_t_C) if delay_s else prep.case_at_t_C
+    Tp = np.concatenate([[T_seen[0]], T_seen[keep]])
     rp = np.concatenate([[prep.rate_true_dps[0]], prep.rate_true_dps[keep]])
     idx = np.clip(np.round(prep.t_s / dt).astype(int) - 1, 0, None)
     # the record's own resolution (a coarser converter than the scenario's) applies to the null too
@@ -98,6 +106,8 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
         res = run_envelope(s, progress=False, log=lambda m: None)
         i = np.clip(idx, 0, len(res.time_s) - 1)
         x = {c: np.asarray(res[c])[i] for c in CHANNELS}
+        if knobs is not None:
+            x = {c: v for c, v in apply_channels(knobs[k], x).items() if c in CHANNELS}
         if raw is not None:
             raw.append({c: x[c] for j, c in enumerate(CHANNELS) if lattice[j] > 0})
         out.append({c: quantize(x[c], lattice[j]) for j, c in enumerate(CHANNELS)})
