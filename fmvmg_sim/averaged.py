@@ -337,6 +337,40 @@ def closed_form_scale_factor_V_per_dps(dg: Diagram) -> float:
     return float(sf_rad * np.pi / 180.0)
 
 
+def bias_temperature_coefficients_dph_per_K(device, temperature_C: float | None = None,
+                                            step_K: float = 0.5) -> dict:
+    """Zero-rate bias temperature coefficients of ``device``: together, through the die, through the board.
+
+    Central differences of the averaged steady state's bias (divided by the nominal scale factor at the
+    reference temperature, as the records are): ``total`` with die and board at one temperature (a slow
+    oven), ``die`` with the board held (the MEMS laws), ``board`` with the die held (the electronics
+    laws). ``total = die + board`` to first order.
+
+    Parameters
+    ----------
+    device : fmvmg_sim.device.Device
+    temperature_C : float, optional
+        Where to take the derivatives (default: the device's reference temperature).
+    step_K : float, optional
+        Half-width of the central differences.
+
+    Returns
+    -------
+    dict
+        ``total``, ``die`` and ``board`` in deg/h per K.
+    """
+    T = device.reference_temperature_C if temperature_C is None else float(temperature_C)
+    sf = nominal_scale_factor_V_per_dps(device)
+
+    def bias_dph(die_C, board_C):
+        return steady_state(build_diagram(device, die_C, board_C=board_C)).rate_V / sf * 3600.0
+
+    lo, hi = T - step_K, T + step_K
+    return {"total": (bias_dph(hi, hi) - bias_dph(lo, lo)) / (2 * step_K),
+            "die": (bias_dph(hi, T) - bias_dph(lo, T)) / (2 * step_K),
+            "board": (bias_dph(T, hi) - bias_dph(T, lo)) / (2 * step_K)}
+
+
 _NOMINAL_SF: dict = {}
 
 

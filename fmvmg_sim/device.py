@@ -82,22 +82,33 @@ OPTIONAL_KEYS = {"mechanics.duffing_k3_rel", "thermal.q_extra_tc_per_K", "therma
 
 DEVICES_DIR = scenarios_dir() / "devices"
 
+#: Temperature coefficients that follow the board (the electronics); every other law follows the die.
+BOARD_LAWS = ("circuit.drive_amp.gain_tc_per_K", "circuit.drive_amp.gbw_tc_per_K",
+              "circuit.sense_amp1.gain_tc_per_K", "circuit.sense_amp1.gbw_tc_per_K",
+              "circuit.sense_amp2.gain_tc_per_K", "circuit.sense_amp2.gbw_tc_per_K",
+              "circuit.phase_shifter.rc_tc_per_K", "circuit.rectifier.offset_tc_V_per_K",
+              "circuit.reference.vref_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K",
+              "circuit.sense_pickoff.c_feedthrough_tc_per_K")
+
 
 @dataclass
 class OperatingPoint:
-    """Every block parameter of the device and circuit at one temperature.
+    """Every block parameter of the device and circuit at one operating temperature.
 
     Parameters
     ----------
     temperature_C : float
-        Die (and board) temperature.
+        Die temperature (the MEMS laws).
     values : dict
         ``{"mechanics": {...}, "circuit": {...}, "noise": {...}}`` with the temperature
         laws applied; see :meth:`Device.at`.
+    board_temperature_C : float, optional
+        Board temperature (the electronics laws); ``None`` when it equals the die temperature.
     """
 
     temperature_C: float
     values: dict = field(default_factory=dict)
+    board_temperature_C: float | None = None
 
     def __getitem__(self, key):
         return self.values[key]
@@ -147,13 +158,21 @@ class Device:
         _merge(merged, checked)
         return Device(merged, self.path)
 
-    def at(self, temperature_C: float) -> OperatingPoint:
-        """Apply the temperature laws: the block parameters at ``temperature_C``.
+    def at(self, temperature_C: float, board_C: float | None = None) -> OperatingPoint:
+        """Apply the temperature laws: the block parameters at a die and a board temperature.
+
+        The MEMS laws (mode frequencies and split, Q, quadrature, damping coupling,
+        electrostatic and Duffing stiffness, Brownian-noise temperature) follow the die;
+        the electronics laws (amplifier gains and bandwidths, phase-shifter RC, rectifier
+        offset, Vref, demodulation-phase drift, the board's feedthrough capacitance) follow
+        the board. :data:`BOARD_LAWS` lists the latter; docs/model.md says why.
 
         Parameters
         ----------
         temperature_C : float
-            Die/board temperature in degC.
+            Die temperature in degC.
+        board_C : float, optional
+            Board (electronics) temperature in degC; default: the die temperature.
 
         Returns
         -------
@@ -163,6 +182,7 @@ class Device:
         me, th, ci = v["mechanics"], v["thermal"], v["circuit"]
         T0 = self.reference_temperature_C
         dT = float(temperature_C) - T0
+        dTb = dT if board_C is None else float(board_C) - T0
         f_d = law.frequency_Hz(me["f_drive_Hz"], dT, th["tcf_linear_per_K"], th["tcf_quadratic_per_K2"])
         f_s_mech = (law.frequency_Hz(me["f_sense_Hz"], dT, th["tcf_linear_per_K"], th["tcf_quadratic_per_K2"])
                     + me["f_drive_Hz"] * th["split_tcf_per_K"] * dT + th.get("split_extra_Hz_per_K", 0.0) * dT)
@@ -183,23 +203,25 @@ class Device:
                     k3_drive_N_per_m3=me["duffing_k3_drive_N_per_m3"] + self._k3_from_rel(),
                     temperature_K=temperature_C + law.KELVIN)
 
+        # --- the electronics, on the board ---
         def amp(d):
-            return dict(gain=law.linear_tc(d["gain"], dT, d["gain_tc_per_K"]),
-                        gbw_Hz=law.linear_tc(d["gbw_Hz"], dT, d["gbw_tc_per_K"]), offset_V=d["offset_V"])
+            return dict(gain=law.linear_tc(d["gain"], dTb, d["gain_tc_per_K"]),
+                        gbw_Hz=law.linear_tc(d["gbw_Hz"], dTb, d["gbw_tc_per_K"]), offset_V=d["offset_V"])
 
         ps = ci["phase_shifter"]
         circ = {
             "drive_pickoff": dict(ci["drive_pickoff"]),
             "drive_amp": amp(ci["drive_amp"]),
             "phase_shifter": dict(design_frequency_Hz=ps["design_frequency_Hz"], trim_rad=ps["trim_rad"],
-                                  rc_tc_per_K=ps["rc_tc_per_K"], delta_T_K=dT),
-            "rectifier": dict(gain=ci["rectifier"]["gain"], offset_V=ci["rectifier"]["offset_tc_V_per_K"] * dT),
+                                  rc_tc_per_K=ps["rc_tc_per_K"], delta_T_K=dTb),
+            "rectifier": dict(gain=ci["rectifier"]["gain"], offset_V=ci["rectifier"]["offset_tc_V_per_K"] * dTb),
             "amplitude_lpf": dict(ci["amplitude_lpf"]),
-            "reference": dict(vref_V=law.linear_tc(ci["reference"]["vref_V"], dT, ci["reference"]["vref_tc_per_K"])),
+            "reference": dict(vref_V=law.linear_tc(ci["reference"]["vref_V"], dTb,
+                                                   ci["reference"]["vref_tc_per_K"])),
             "pi": dict(ci["pi"]),
             "modulator": dict(ci["modulator"]),
             "comb_drive": dict(ci["comb_drive"]),
-            "sense_pickoff": _feedthrough_at(ci["sense_pickoff"], dT),
+            "sense_pickoff": _feedthrough_at(ci["sense_pickoff"], dTb),
             "sense_amp1": amp(ci["sense_amp1"]),
             "sense_amp2": amp(ci["sense_amp2"]),
             "demodulator": {k: val for k, val in ci["demodulator"].items() if k != "phase_tc_rad_per_K"},
@@ -207,7 +229,9 @@ class Device:
         }
         return OperatingPoint(float(temperature_C), {
             "mechanics": mech, "circuit": circ, "noise": dict(v["noise"]), "delta_T_K": dT,
-            "demod_phase_drift_rad": ci["demodulator"].get("phase_tc_rad_per_K", 0.0) * dT})
+            "board_delta_T_K": dTb,
+            "demod_phase_drift_rad": ci["demodulator"].get("phase_tc_rad_per_K", 0.0) * dTb},
+            None if board_C is None else float(board_C))
 
     def nominal_amplitude_m(self) -> float:
         """Drive amplitude the AGC holds at the reference temperature, ``(pi/2) Vref / (G_r K_dx)``.

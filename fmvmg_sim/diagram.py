@@ -1,7 +1,8 @@
 """The wiring of paper 000's Figure 3 (blocks 1-14) from the block library.
 
-``build_diagram(device, T)`` instantiates every block with its parameters at the
-temperature ``T`` and knows how they connect. Both engines and the tuning tools use
+``build_diagram(device, T, board_C=Tb)`` instantiates every block with its parameters at the
+die temperature ``T`` (MEMS) and the board temperature ``Tb`` (electronics, default ``T``) and
+knows how they connect. Both engines and the tuning tools use
 it: the carrier engine discretises :meth:`Diagram.core_system` exactly and runs the
 nonlinear blocks' carrier faces; the averaged model (:mod:`fmvmg_sim.averaged`) uses
 the blocks' frequency responses and describing functions.
@@ -82,8 +83,14 @@ class Diagram:
 
     @property
     def temperature_C(self) -> float:
-        """Temperature of this operating point."""
+        """Die temperature of this operating point."""
         return self.op.temperature_C
+
+    @property
+    def board_temperature_C(self) -> float:
+        """Board temperature of this operating point (the die's when not given apart)."""
+        b = self.op.board_temperature_C
+        return self.op.temperature_C if b is None else b
 
     @property
     def omega_drive_rad_s(self) -> float:
@@ -236,21 +243,25 @@ def design_phase_trim(device: Device) -> float:
     return _trim_for(device)
 
 
-def build_diagram(device: Device, temperature_C: float, quad_delta_rel: float = 0.0) -> Diagram:
-    """All blocks of ``device`` at ``temperature_C``.
+def build_diagram(device: Device, temperature_C: float, quad_delta_rel: float = 0.0,
+                  board_C: float | None = None) -> Diagram:
+    """All blocks of ``device`` at the die temperature ``temperature_C`` and the board temperature ``board_C``.
 
     Parameters
     ----------
     device : Device
     temperature_C : float
+        Die temperature (the MEMS laws).
     quad_delta_rel : float, optional
         Relative change of the quadrature stiffness (hysteresis, stress relaxation).
+    board_C : float, optional
+        Board temperature (the electronics laws); default: the die temperature.
 
     Returns
     -------
     Diagram
     """
-    op = device.at(temperature_C)
+    op = device.at(temperature_C, board_C)
     if quad_delta_rel:
         op.values["mechanics"]["k_quad_N_per_m"] *= 1.0 + quad_delta_rel
     # the reference phase is trimmed once, at the reference temperature; its drift follows the board

@@ -3,12 +3,13 @@
 Each effect is a small model with 1-3 physical parameters, bounds and a prior range
 (physics brief section 4), acting where the physics acts:
 
-* through the device's temperature laws (evaluated at the die temperature, in both
-  engines and in the averaged model): ``quadrature_drift``, ``q_factor_drift``,
-  ``mode_split_drift``, ``feedthrough``, ``duffing``, ``reference_drift``,
-  ``demod_phase_drift``;
-* through the die temperature itself: ``thermal_lag`` (everything, drive frequency included,
-  follows the lagged die temperature while the sensor reads the case);
+* through the device's temperature laws (in both engines and in the averaged model), at the
+  die temperature for the MEMS (``quadrature_drift``, ``q_factor_drift``, ``mode_split_drift``,
+  ``duffing``) and at the board temperature for the electronics (``feedthrough``,
+  ``reference_drift``, ``demod_phase_drift``);
+* through the die temperature itself: ``thermal_lag`` (the MEMS, drive frequency included,
+  follow the lagged die temperature; the board and its electronics stay with the case, which
+  the sensor reads);
 * through time-history signals: ``thermal_hysteresis`` and ``stress_relaxation`` change the
   quadrature stiffness (so quadrature and, through the phase errors, bias move together);
   ``temperature_rate`` adds an equivalent rate proportional to dT_die/dt;
@@ -209,6 +210,36 @@ class EffectSet:
         if not e:
             return case_C.copy()
         return first_order_lag(t_s, case_C, e["tau_s"]) + e["offset_K"]
+
+    def settled_die_temperature(self, case_C: float) -> float:
+        """Die temperature after a long hold at the case temperature ``case_C`` (the lag's offset only).
+
+        Parameters
+        ----------
+        case_C : float
+
+        Returns
+        -------
+        float
+        """
+        e = self.get("thermal_lag")
+        return float(case_C) + (e["offset_K"] if e else 0.0)
+
+    def board_temperature(self, t_s: np.ndarray, case_C: np.ndarray) -> np.ndarray:
+        """Board (electronics) temperature: the case temperature, which the sensor reads.
+
+        Parameters
+        ----------
+        t_s : ndarray
+            Times (unused: the board has no lag of its own).
+        case_C : ndarray
+            Case (sensor) temperature at those times.
+
+        Returns
+        -------
+        ndarray
+        """
+        return np.asarray(case_C, dtype=float).copy()
 
     def signals(self, t_s: np.ndarray, die_C: np.ndarray) -> dict:
         """Time-history signals: extra rate (deg/s) and relative quadrature-stiffness change.

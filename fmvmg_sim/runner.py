@@ -7,6 +7,7 @@ import numpy as np
 from . import thermal_laws as law
 from .averaged import scale_factor_V_per_dps, steady_state
 from .diagram import build_diagram
+from .effects import EffectSet
 from .result import SimResult
 from .errors import InputError
 from .output import format_bytes
@@ -100,18 +101,23 @@ def vref_profile_V(scn: Scenario, t_s: np.ndarray, temperature_C: np.ndarray) ->
 
 
 def predictions(scn: Scenario, temperature_C: float) -> dict:
-    """Analytic (averaged-model) steady state at ``temperature_C``, for reports.
+    """Analytic (averaged-model) steady state after a long hold at the sensor temperature ``temperature_C``.
+
+    The board (electronics) is at ``temperature_C``; the die at the same, or off it by the
+    ``thermal_lag`` effect's offset.
 
     Parameters
     ----------
     scn : Scenario
     temperature_C : float
+        Case (sensor) temperature.
 
     Returns
     -------
     dict
     """
-    dg = build_diagram(scn.device, temperature_C)
+    die_C = EffectSet(scn.effects).settled_die_temperature(temperature_C)
+    dg = build_diagram(scn.device, die_C, board_C=temperature_C)
     ss = steady_state(dg)
     sf = scale_factor_V_per_dps(dg)
     return dict(temperature_C=float(temperature_C), drive_frequency_Hz=ss.f_Hz, drive_amplitude_m=ss.amplitude_m,

@@ -83,3 +83,16 @@ def test_the_shipped_scenario_table_lists_every_shipped_scenario():
     text = (DOCS / "model.md").read_text()
     for name in shipped_scenarios():
         assert f"`{name}`" in text, name
+
+
+def test_the_bias_tc_table_matches_the_devices():
+    """docs/model.md states each shipped device's bias TC and its die and board shares as the averaged model gives them."""
+    from fmvmg_sim.averaged import bias_temperature_coefficients_dph_per_K
+    from fmvmg_sim.device import DEVICES_DIR, load_device
+    text = (DOCS / "model.md").read_text()
+    rows = {m.group(1): [float(x) for x in m.group(2, 3, 4)]
+            for m in re.finditer(r"^\| `(\w+)` \| ([-+]\d+) \| ([-+]\d+) \| ([-+]\d+) \|$", text, flags=re.M)}
+    assert set(rows) == {p.stem for p in DEVICES_DIR.glob("*.toml")}
+    for name, stated in rows.items():
+        tc = bias_temperature_coefficients_dph_per_K(load_device(name))
+        assert stated == pytest.approx([tc["total"], tc["die"], tc["board"]], abs=1.0), name

@@ -114,16 +114,22 @@ def test_noise_factor_reproduces_badly_scaled_covariances():
     assert np.all(L2[0] == 0)  # the first state is not reachable from the remaining noise
 
 
-def test_temperature_interpolation_of_the_discretised_model_is_accurate():
+@pytest.mark.parametrize("offsets", [(0.0, 0.0), (-22.0, 8.0)], ids=["board-on-die", "board-off-die"])
+def test_temperature_interpolation_of_the_discretised_model_is_accurate(offsets):
+    """The parameter table against the model discretised directly, at die temperatures and board-minus-die
+    offsets between the nodes (a 1-D spline when the board follows the die, a tensor spline when not)."""
     from fmvmg_sim.device import load_device
     from fmvmg_sim.envelope.engine import _ParamTable
     from fmvmg_sim.envelope.model import PARAMS, operating_params
     dev = load_device("fmvmg_a")
     on = {"brownian": True, "electronic": True}
-    tab = _ParamTable(dev, 0.01, on, -40.0, 85.0)
-    for T in (12.34, -33.3, 71.7):
-        Pi = tab(T)[0]
-        Pd = PARAMS.pack(operating_params(build_diagram(dev, T), 0.01, on))
+    lo, hi = offsets
+    tab = _ParamTable(dev, 0.01, on, -40.0, 85.0, lo, hi)
+    assert len(tab.offsets) == (1 if lo == hi else 4)
+    for T, w in ((12.34, 0.13), (-33.3, 0.58), (71.7, 0.91)):
+        off = lo + w * (hi - lo)
+        Pi = tab(np.array([T]), np.array([off]))[0]
+        Pd = PARAMS.pack(operating_params(build_diagram(dev, T, board_C=T + off), 0.01, on))
         for name, sl in PARAMS.slices.items():
             if name == "L":  # compare the covariances the factors stand for
                 n = PARAMS.shapes["L"][0]

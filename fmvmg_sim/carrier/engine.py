@@ -1,8 +1,9 @@
 """Run scenarios at carrier level: the compiled step rolled out with temperature and rate as inputs.
 
 A run is cut into output samples of ``M`` steps. Each sample has its parameter
-vector: the discretised diagram at the sample's temperature (an operating point,
-cached per 1 mK and kept across runs of the same device in a process), the input
+vector: the discretised diagram at the sample's die and board temperatures (an
+operating point, cached per 1 mK of each and kept across runs of the same device in a
+process), the input
 rate, and the demodulation-phase flicker. Noise draws come from one seeded
 generator per unit in a fixed order, so a seed gives the same record bit for bit.
 
@@ -104,6 +105,7 @@ class _Unit:
         case_mid = np.asarray(scn.temperature(t_mid), dtype=float)
         fx = self.fx = EffectSet(scn.effects)
         temp = fx.die_temperature(t_mid, case_mid)
+        board = fx.board_temperature(t_mid, case_mid)
         self.sig = fx.signals(t_mid, temp)
         self.rate_dps = np.asarray(scn.rate(t_mid), dtype=float) + self.sig["rate_dps"]
         self.rate_end = np.asarray(scn.rate(self.t_end), dtype=float)
@@ -121,24 +123,27 @@ class _Unit:
         self.noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
         self.any_noise = nz["brownian"] or nz["electronic"]
         self.scale = ref.core_state_scale()
-        self.keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K  # operating points, cached per 1 mK
+        # operating points, cached per 1 mK of die and of board temperature
+        self.keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K
+        self.board_keys = np.round(board / T_QUANTUM_K) * T_QUANTUM_K
         self.plans: dict = {}
         self._device_id = _device_id(dev)
         self.per_call = max(1, int(round(CALL_S / dt_out)))
-        p0 = self.plan_for(self.keys[0])
+        p0 = self.plan_for(self.keys[0], self.board_keys[0])
         self.x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
                                from_steady=scn.settings["initial"]["state"] == "steady")
         self.X = np.empty((n, STATE.size))
 
-    def plan_for(self, key):
-        """The operating plan at ``key`` (the die temperature, rounded)."""
-        key = float(key)
+    def plan_for(self, key, board_key):
+        """The operating plan at die temperature ``key`` and board temperature ``board_key`` (both rounded)."""
+        key = (float(key), float(board_key))
         if key not in self.plans:
             ck = (self._device_id, key, self.h, tuple(sorted(self.noise_on.items())), self.scale.tobytes())
             plan = _PLANS.get(ck)
             if plan is None:
                 with _one_blas_thread():
-                    plan = make_plan(build_diagram(self.dev, key), self.h, self.noise_on, self.scale)
+                    plan = make_plan(build_diagram(self.dev, key[0], board_C=key[1]), self.h, self.noise_on,
+                                     self.scale)
                 _PLANS[ck] = plan
                 while len(_PLANS) > PLAN_CACHE_SIZE:
                     _PLANS.popitem(last=False)
@@ -147,15 +152,21 @@ class _Unit:
             self.plans[key] = plan
         return self.plans[key]
 
+    def operating_points(self, k0: int = 0, k1: int | None = None) -> tuple:
+        """The distinct (die, board) keys of samples ``k0 .. k1 - 1`` and each sample's index into them."""
+        pairs = np.stack([self.keys[k0:k1], self.board_keys[k0:k1]], axis=1)
+        uniq, inv = np.unique(pairs, axis=0, return_inverse=True)
+        return uniq, inv.reshape(-1)
+
     def params(self, k0: int, k1: int) -> np.ndarray:
         """Parameter rows of samples ``k0 .. k1 - 1``."""
         P = np.empty((k1 - k0, STATE_P))
-        uniq, inv = np.unique(self.keys[k0:k1], return_inverse=True)
-        for j, key in enumerate(uniq):
+        uniq, inv = self.operating_points(k0, k1)
+        for j, (key, board_key) in enumerate(uniq):
             rows = np.flatnonzero(inv == j)
             ks = rows + k0
-            P[rows] = self.plan_for(key).params(np.deg2rad(self.rate_dps[ks]), self.phase_flicker[ks],
-                                                self.vref_f[ks], self.sig["quad_rel"][ks])
+            P[rows] = self.plan_for(key, board_key).params(np.deg2rad(self.rate_dps[ks]), self.phase_flicker[ks],
+                                                          self.vref_f[ks], self.sig["quad_rel"][ks])
         return P
 
     def result(self, roll) -> SimResult:
@@ -264,7 +275,7 @@ def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=No
     total = sum(u.n for u in units)
     per_step_s = (100e-9 if len(units) == 1 else 60e-9) if roll.compiled else 1e-6
     est_s = sum(u.n * u.M for u in units) * per_step_s + 0.04 * sum(
-        len(np.unique(u.keys)) for u in units)
+        len(u.operating_points()[0]) for u in units)
     show = progress if progress is not None else est_s > 3.0
     desc = f"carrier {scns[0].name}" if len(units) == 1 else f"carrier x{len(units)}"
     bar = tqdm(total=total, disable=not show, file=sys.stderr, unit="sample", desc=desc, mininterval=0.5)

@@ -265,9 +265,15 @@ def _solve_mde(pw, hi_bound: float, target: float = POWER) -> float | None:
 
 
 def _lag_column(fitter, cal) -> np.ndarray:
-    """Response per second of a short thermal lag: the temperature slope times the die's rate (K/s)."""
+    """Response per second of a short thermal lag: the die-temperature slope (the board stays on the case) times
+    the die's rate (K/s)."""
     path = fitter.path(None)
-    return -np.nan_to_num(cal.base.slope(path["die_b"])) * (path["dTdt_b"] / 60.0)[:, None]
+    return -np.nan_to_num(_die_slope(fitter, cal, path["die_b"])) * (path["dTdt_b"] / 60.0)[:, None]
+
+
+def _die_slope(fitter, cal, die_b: np.ndarray) -> np.ndarray:
+    """Slope of the calibrated response in the die temperature alone, the board held on the case."""
+    return fitter.table(cal.theta, board=True).die_slope(die_b)
 
 
 def effect_limits(scorer: Scorer, name: str) -> dict:
@@ -299,7 +305,7 @@ def effect_limits(scorer: Scorer, name: str) -> dict:
         path = f.path(None)
         lin = f.nominal_lin(em.theta, em.base, path, em.cal_jac())
         die = path["die_b"]
-        C = np.stack([em.base.slope(die), _lag_column(f, cal)], axis=-1)
+        C = np.stack([_die_slope(f, cal, die), _lag_column(f, cal)], axis=-1)
         off, tau = MODELS[name]["offset_K"], MODELS[name]["tau_s"]
         lin = type(lin)(lin.y0, np.concatenate([lin.cols, C], axis=-1),
                         list(lin.names) + ["thermal_lag.offset_K", "thermal_lag.tau_s"],

@@ -158,6 +158,7 @@ class Fitter:
         #: this much later (the calibrated ``temperature_delay_s``)
         self.delay_s = 0.0
         self._nom_jac = None
+        self._nom_jac_board = None
         self._nom_jac_theta = None
         self.table_builds = 0
         #: Tables already built, by their exact inputs (:meth:`table`), for this device and grid
@@ -192,7 +193,7 @@ class Fitter:
         return apply_effects(dev, eff)
 
     def table(self, theta: dict, effects: dict | None = None, quad: bool = False,
-              rate: bool = False) -> ResponseTable:
+              rate: bool = False, board: bool = False) -> ResponseTable:
         """Response table of the model at ``(theta, effects)``.
 
         Parameters
@@ -202,6 +203,8 @@ class Fitter:
             Also the quadrature sensitivity.
         rate : bool
             Also the rate sensitivity (always when the record has an applied rate).
+        board : bool
+            Also the sensitivity to the board standing off the die (a thermal lag's path needs it).
 
         Returns
         -------
@@ -217,14 +220,17 @@ class Fitter:
         values = list(theta.values()) + [v for p in eff.values() for v in p.values()]
         key = None
         if all(type(v) in (float, int) for v in values):
-            key = repr((list(theta.items()), sorted((n, sorted(p.items())) for n, p in eff.items()), quad, rate))
+            key = repr((list(theta.items()), sorted((n, sorted(p.items())) for n, p in eff.items()), quad, rate,
+                        board))
         tab = self._tables.get(key) if key is not None else None
         if tab is None:
             self.table_builds += 1
-            tab = response_table(self.device(theta, eff), self.grid, with_rate=rate, with_quad=quad)
+            tab = response_table(self.device(theta, eff), self.grid, with_rate=rate, with_quad=quad, with_board=board)
             if key is not None:
                 self._tables[key] = tab
-        return ResponseTable(tab.grid_C, tab.base.copy(), tab.d_rate.copy(), tab.d_quad.copy())
+        return ResponseTable(tab.grid_C, tab.base.copy(), tab.d_rate.copy(), tab.d_quad.copy(),
+                             *(None if a is None else a.copy()
+                               for a in (tab.d_board, tab.d2_board, tab.d_rate_board, tab.d_quad_board)))
 
     def _channel_names(self) -> set:
         return {k.name for k, _ in self._chan}
@@ -292,21 +298,35 @@ class Fitter:
         -------
         ResponseTable
         """
+        def diff(a, b):
+            return None if a is None or b is None else (a - b) / step
         return ResponseTable(self.grid, (t1.base - t0.base) / step, (t1.d_rate - t0.d_rate) / step,
-                             np.zeros_like(t0.base))
+                             np.zeros_like(t0.base), diff(t1.d_board, t0.d_board), diff(t1.d2_board, t0.d2_board),
+                             diff(t1.d_rate_board, t0.d_rate_board))
 
-    def nominal_jacobian(self, theta: dict, base: ResponseTable) -> list:
+    def nominal_jacobian(self, theta: dict, base: ResponseTable, board: bool = False) -> list:
         """Finite-difference tables of the nominal knobs at ``theta`` (cached after the first call).
 
         Parameters
         ----------
         theta : dict
         base : ResponseTable
+        board : bool, optional
+            With the board sensitivities (a thermal lag's path): each knob's column then follows the board
+            off the die, against a base table built with them at ``theta`` (``base`` is not used).
 
         Returns
         -------
         list of ResponseTable
         """
+        if board:  # kept per theta: several calibrations (folds) share a fitter
+            key = repr(sorted(theta.items()))
+            if self._nom_jac_board is None or self._nom_jac_board[0] != key:
+                b0 = self.table(theta, board=True)
+                self._nom_jac_board = (key, [self.diff_table(
+                    self.table({**theta, k.name: theta.get(k.name, 0.0) + k.step}, board=True), b0, k.step)
+                    for k in self.knobs.device_knobs])
+            return self._nom_jac_board[1]
         if self._nom_jac is None:
             out = []
             for k in self.knobs.device_knobs:
@@ -329,7 +349,8 @@ class Fitter:
         -------
         dict
             ``die`` (full rate), ``die_b``, ``rate_b`` (applied + equivalent), ``quad_b``, ``dTdt_b`` (die, K/min),
-            ``relax_b`` (t in s for stress relaxation templates).
+            ``relax_b`` (t in s for stress relaxation templates), ``board_b`` (the board, i.e. the case, minus the
+            die, K; None without a thermal lag).
         """
         key = repr((sorted((effects or {}).items()), self.delay_s))
         if key in self._paths:
@@ -342,6 +363,7 @@ class Fitter:
         out = dict(die=die, die_b=p.block_mean(die), rate_b=self.rate_b + p.block_mean(sig["rate_dps"]),
                    quad_b=p.block_mean(sig["quad_rel"]))
         out["dTdt_b"] = p.block_mean(np.gradient(die, p.t_mid_s) * 60.0) if len(die) > 1 else np.zeros(p.n_blocks)
+        out["board_b"] = p.block_mean(fx.board_temperature(p.t_mid_s, case) - die) if fx.get("thermal_lag") else None
         if len(self._paths) > 64:
             self._paths.clear()
         self._paths[key] = out
@@ -364,14 +386,16 @@ class Fitter:
         """
         jac = jac if jac is not None else self.nominal_jacobian(theta, base)
         die, rate, quad = path["die_b"], path["rate_b"], path["quad_b"]
-        raw = base.evaluate(die, rate, quad)
+        board = path.get("board_b")
+        raw = base.evaluate(die, rate, quad, board)
         gain = self.channel_gains(theta)
         y0 = self.through_channels(theta, raw)
         dev = iter(jac)
         cols = []
         for k in self.knobs.knobs:
             if k.on_device:
-                cols.append(next(dev).evaluate(die, rate) * gain[None, :])
+                j = next(dev)
+                cols.append(j.evaluate(die, rate, None, board if j.d_board is not None else None) * gain[None, :])
                 continue
             if k.kind == "delay":
                 # read d later, the temperature the channels saw is the reading plus d dT/dt

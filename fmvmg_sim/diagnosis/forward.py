@@ -2,10 +2,12 @@
 
 Thermal effects are slow against the loop dynamics (the drive loop settles in tens of ms, the
 output filter in ms), so at each instant the gyro sits on the averaged model's periodic steady
-state (:func:`fmvmg_sim.averaged.steady_state`) at its die temperature. The model computes that
-steady state on a temperature grid (base response, plus the linear sensitivity to an applied rate
-and to a relative change of the quadrature stiffness), interpolates it with cubic splines and
-adds the time-history signals of the effects (:meth:`fmvmg_sim.effects.EffectSet.signals`).
+state (:func:`fmvmg_sim.averaged.steady_state`) at its die temperature (the MEMS laws) and its board
+temperature (the electronics, which stay on the case under a thermal lag). The model computes that
+steady state on a temperature grid with the board at the die (base response, plus the linear
+sensitivities to an applied rate, to a relative change of the quadrature stiffness and to the board
+standing off the die), interpolates it with cubic splines and adds the time-history signals of the
+effects (:meth:`fmvmg_sim.effects.EffectSet.signals`).
 
 A 13 h record at 10 Hz is predicted in a few ms once the ~60 steady states (0.2 s) are known;
 :func:`fmvmg_sim.envelope.engine.run_envelope` (with noise) stays the reference and builds the null.
@@ -29,6 +31,8 @@ IRATE, IQUAD, IAMP, IAGC, IFREQ = range(len(CHANNELS))
 GRID_K = 5.0
 _RATE_STEP_DPS = 1.0
 _QUAD_STEP = 1e-3
+#: Board-temperature step (K) of the board sensitivities (central differences, first and second order).
+_BOARD_STEP_K = 2.0
 
 
 def temperature_grid(t_min_C: float, t_max_C: float, spacing_K: float = GRID_K) -> np.ndarray:
@@ -65,16 +69,28 @@ class ResponseTable:
         Change per deg/s of applied (or equivalent) rate.
     d_quad : ndarray, shape (G, C)
         Change per unit relative quadrature-stiffness change.
+    d_board : ndarray, shape (G, C), optional
+        Change per kelvin of the board (the electronics) above the die; None when not computed.
+    d2_board : ndarray, shape (G, C), optional
+        Second derivative in the board temperature (per K^2; the electronic phase enters the output through a
+        cosine and the bandwidth through a reciprocal, so tens of kelvin of board offset need it).
+    d_rate_board, d_quad_board : ndarray, shape (G, C), optional
+        Change of ``d_rate`` and ``d_quad`` per kelvin of board offset (the electronic phase turns a rate or a
+        quadrature change between the two demodulated channels).
     """
 
     grid_C: np.ndarray
     base: np.ndarray
     d_rate: np.ndarray
     d_quad: np.ndarray
+    d_board: np.ndarray | None = None
+    d2_board: np.ndarray | None = None
+    d_rate_board: np.ndarray | None = None
+    d_quad_board: np.ndarray | None = None
     _splines: dict = field(default_factory=dict, repr=False)
 
     def spline(self, which: str) -> CubicSpline:
-        """Cubic spline (over temperature) of ``base``, ``d_rate`` or ``d_quad``.
+        """Cubic spline (over temperature) of ``base``, ``d_rate``, ``d_quad``, ``d_board`` or ``d2_board``.
 
         Parameters
         ----------
@@ -89,8 +105,8 @@ class ResponseTable:
         return self._splines[which]
 
     def evaluate(self, die_C: np.ndarray, rate_dps: np.ndarray | None = None,
-                 quad_rel: np.ndarray | None = None) -> np.ndarray:
-        """Channels at die temperatures, with an equivalent rate and a quadrature change.
+                 quad_rel: np.ndarray | None = None, board_offset_K: np.ndarray | None = None) -> np.ndarray:
+        """Channels at die temperatures, with an equivalent rate, a quadrature change and the board off the die.
 
         Parameters
         ----------
@@ -99,20 +115,30 @@ class ResponseTable:
             Applied plus equivalent rate (deg/s).
         quad_rel : ndarray, optional
             Relative quadrature-stiffness change.
+        board_offset_K : ndarray, optional
+            Board minus die temperature (K); needs a table built with the board sensitivity.
 
         Returns
         -------
         ndarray, shape (n, C)
         """
         y = self.spline("base")(die_C)
-        if rate_dps is not None and np.any(rate_dps != 0):
-            y = y + self.spline("d_rate")(die_C) * np.asarray(rate_dps)[:, None]
-        if quad_rel is not None and np.any(quad_rel != 0):
-            y = y + self.spline("d_quad")(die_C) * np.asarray(quad_rel)[:, None]
+        board = board_offset_K is not None and np.any(board_offset_K != 0)
+        if board and self.d_board is None:
+            raise ValueError("this response table was built without the board sensitivity")
+        o = np.asarray(board_offset_K)[:, None] if board else 0.0
+        for name, u in (("rate", rate_dps), ("quad", quad_rel)):
+            if u is not None and np.any(u != 0):
+                d = self.spline(f"d_{name}")(die_C)
+                if board and getattr(self, f"d_{name}_board") is not None:
+                    d = d + self.spline(f"d_{name}_board")(die_C) * o
+                y = y + d * np.asarray(u)[:, None]
+        if board:
+            y = y + (self.spline("d_board")(die_C) + 0.5 * self.spline("d2_board")(die_C) * o) * o
         return y
 
     def slope(self, die_C: np.ndarray) -> np.ndarray:
-        """Temperature derivative of the base response (per K).
+        """Temperature derivative of the base response (per K), die and board moving together.
 
         Parameters
         ----------
@@ -124,9 +150,24 @@ class ResponseTable:
         """
         return self.spline("base")(die_C, 1)
 
+    def die_slope(self, die_C: np.ndarray) -> np.ndarray:
+        """Derivative of the base response in the die temperature alone, the board held (per K).
 
-def response_table(device, grid_C: np.ndarray, with_rate: bool = True, with_quad: bool = True) -> ResponseTable:
-    """Steady states of ``device`` on ``grid_C`` (3 per point: base, rate step, quadrature step).
+        Parameters
+        ----------
+        die_C : ndarray
+
+        Returns
+        -------
+        ndarray, shape (n, C)
+        """
+        d = self.slope(die_C)
+        return d if self.d_board is None else d - self.spline("d_board")(die_C)
+
+
+def response_table(device, grid_C: np.ndarray, with_rate: bool = True, with_quad: bool = True,
+                   with_board: bool = False) -> ResponseTable:
+    """Steady states of ``device`` on ``grid_C`` (base, rate step, quadrature step, board steps).
 
     Parameters
     ----------
@@ -135,6 +176,9 @@ def response_table(device, grid_C: np.ndarray, with_rate: bool = True, with_quad
     grid_C : ndarray
     with_rate, with_quad : bool, optional
         Skip a sensitivity (left zero) to save time.
+    with_board : bool, optional
+        Also the sensitivity to the board standing off the die (two more steady states per point), which a
+        thermal lag needs.
 
     Returns
     -------
@@ -142,6 +186,7 @@ def response_table(device, grid_C: np.ndarray, with_rate: bool = True, with_quad
     """
     G, C = len(grid_C), len(CHANNELS)
     base, dr, dq = np.zeros((G, C)), np.zeros((G, C)), np.zeros((G, C))
+    db, db2, drb, dqb = (np.zeros((G, C)) for _ in range(4)) if with_board else (None,) * 4
     for i, T in enumerate(grid_C):
         dg = build_diagram(device, float(T))
         b = np.array(_row(steady_state(dg), dg))
@@ -151,11 +196,28 @@ def response_table(device, grid_C: np.ndarray, with_rate: bool = True, with_quad
         if with_quad:
             dq_g = build_diagram(device, float(T), quad_delta_rel=_QUAD_STEP)
             dq[i] = (np.array(_row(steady_state(dq_g), dq_g)) - b) / _QUAD_STEP
-    return ResponseTable(np.asarray(grid_C, dtype=float), base, dr, dq)
+        if with_board:
+            y, d_r, d_q = {}, {}, {}
+            for sgn in (1.0, -1.0):
+                Tb = float(T) + sgn * _BOARD_STEP_K
+                g = build_diagram(device, float(T), board_C=Tb)
+                y[sgn] = np.array(_row(steady_state(g), g))
+                if with_rate:
+                    d_r[sgn] = (np.array(_row(steady_state(g, np.deg2rad(_RATE_STEP_DPS)), g)) - y[sgn]) / _RATE_STEP_DPS
+                if with_quad:
+                    gq = build_diagram(device, float(T), board_C=Tb, quad_delta_rel=_QUAD_STEP)
+                    d_q[sgn] = (np.array(_row(steady_state(gq), gq)) - y[sgn]) / _QUAD_STEP
+            db[i] = (y[1.0] - y[-1.0]) / (2 * _BOARD_STEP_K)
+            db2[i] = (y[1.0] - 2 * b + y[-1.0]) / _BOARD_STEP_K ** 2
+            if with_rate:
+                drb[i] = (d_r[1.0] - d_r[-1.0]) / (2 * _BOARD_STEP_K)
+            if with_quad:
+                dqb[i] = (d_q[1.0] - d_q[-1.0]) / (2 * _BOARD_STEP_K)
+    return ResponseTable(np.asarray(grid_C, dtype=float), base, dr, dq, db, db2, drb, dqb)
 
 
 def die_and_signals(effects: dict, t_s: np.ndarray, case_C: np.ndarray) -> tuple[np.ndarray, dict]:
-    """Die temperature and time-history signals of the effects on a record's time base.
+    """Die temperature and time-history signals of the effects on a record's time base (the board is the case).
 
     Parameters
     ----------
@@ -196,7 +258,8 @@ def predict(table: ResponseTable, effects: dict, t_s: np.ndarray, case_C: np.nda
     """
     die, sig = die_and_signals(effects, t_s, case_C)
     rate = sig["rate_dps"] + (0.0 if rate_true_dps is None else np.asarray(rate_true_dps))
-    return table.evaluate(die, rate, sig["quad_rel"])
+    board = np.asarray(case_C, dtype=float) - die if "thermal_lag" in effects else None
+    return table.evaluate(die, rate, sig["quad_rel"], board)
 
 
 def predict_device(device, effects: dict, t_s: np.ndarray, case_C: np.ndarray,
@@ -222,7 +285,7 @@ def predict_device(device, effects: dict, t_s: np.ndarray, case_C: np.ndarray,
     grid = temperature_grid(np.min(die), np.max(die), spacing_K)
     has_rate = rate_true_dps is not None and np.any(rate_true_dps != 0) or "temperature_rate" in effects
     has_quad = "thermal_hysteresis" in effects or "stress_relaxation" in effects
-    tab = response_table(dev, grid, with_rate=has_rate, with_quad=has_quad)
+    tab = response_table(dev, grid, with_rate=has_rate, with_quad=has_quad, with_board="thermal_lag" in effects)
     y = predict(tab, effects, t_s, case_C, rate_true_dps)
     out = {c: y[:, i] for i, c in enumerate(CHANNELS)}
     out["die_temperature_C"] = die

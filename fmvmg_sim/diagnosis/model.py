@@ -148,7 +148,7 @@ class EffectModel:
     # -- tables
     def _build_tables(self):
         dev_eff = {n: self.values[n] for n in self.names if n in DEVICE_EFFECTS}
-        self.base = self.f.table(self.theta, dev_eff, quad=True, rate=True)
+        self.base = self.f.table(self.theta, dev_eff, quad=True, rate=True, board="thermal_lag" in self.names)
         self.dev_jac = []
         for n in self.names:
             if n not in DEVICE_EFFECTS:
@@ -194,7 +194,7 @@ class EffectModel:
         # base prediction includes device effects at their current values; path effect amplitudes start at 0
         for n in self.names:
             if n == "thermal_lag":
-                cols.append(self.base.slope(die)); names.append("thermal_lag.offset_K")
+                cols.append(self.base.die_slope(die)); names.append("thermal_lag.offset_K")
             elif n == "temperature_rate":
                 cols.append(self.base.spline("d_rate")(die) * (path["dTdt_b"] / 3600.0)[:, None])
                 names.append("temperature_rate.g_dph_per_K_per_min")
@@ -223,7 +223,7 @@ class EffectModel:
 
     def cal_jac(self):
         """Nominal Jacobian tables of the calibration."""
-        return self.f.nominal_jacobian(self.cal.theta, self.cal.base)
+        return self.f.nominal_jacobian(self.cal.theta, self.cal.base, board="thermal_lag" in self.names)
 
     def _search(self, rows: np.ndarray) -> tuple[dict, Lin, Solution]:
         """Grid search (plus refinement) over the free nonlinear parameter; solve on ``rows``."""

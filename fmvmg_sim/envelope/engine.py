@@ -28,6 +28,9 @@ from .step import ENVELOPE_MODEL, N_IN, STATE
 
 #: Spacing of the temperature grid on which the averaged model is discretised (K).
 T_GRID_K = 5.0
+#: Largest spacing of the board-minus-die offset grid (K): the electronics move the parameters by a few
+#: per cent over it, so a quadratic through three nodes is accurate to about 1e-7.
+OFFSET_GRID_K = 10.0
 #: Target length of a parameter block (s).
 BLOCK_S = 1.0
 #: Simulated seconds per compiled call.
@@ -35,34 +38,66 @@ CALL_S = 600.0
 
 
 class _ParamTable:
-    """Packed parameter vectors of the averaged model as a smooth function of temperature."""
+    """Packed parameter vectors of the averaged model as a smooth function of die and board temperature.
 
-    def __init__(self, device, h_s, noise_on, t_lo, t_hi):
+    A cubic spline in the die temperature on a :data:`T_GRID_K` grid; when the board does not follow the
+    die (thermal lag), a tensor-product spline with the board-minus-die offset on a grid of at least three
+    nodes, at most :data:`OFFSET_GRID_K` apart, spanning the offsets the run visits.
+    """
+
+    def __init__(self, device, h_s, noise_on, t_lo, t_hi, off_lo=0.0, off_hi=0.0):
         if t_hi - t_lo < 1e-6:
             grid = np.array([t_lo])
         else:
             n = max(4, int(np.ceil((t_hi - t_lo) / T_GRID_K)) + 3)
             grid = np.linspace(t_lo - T_GRID_K, t_hi + T_GRID_K, n)
         self.grid = grid
-        rows, covs, self.extra = [], [], []
+        if off_hi - off_lo < 1e-6:
+            self.offsets = np.array([0.5 * (off_lo + off_hi)])
+        else:
+            self.offsets = np.linspace(off_lo, off_hi, max(3, int(np.ceil((off_hi - off_lo) / OFFSET_GRID_K)) + 1))
+        tables, covs, self.extra = [], [], []
         for T in grid:
-            op = operating_params(build_diagram(device, float(T)), h_s, noise_on)
-            rows.append(PARAMS.pack(op))
-            covs.append(op["Q"])
-            self.extra.append(op)
-        self.table = np.array(rows)
+            ops = [operating_params(build_diagram(device, float(T), board_C=float(T + o)), h_s, noise_on)
+                   for o in self.offsets]
+            tables.append([PARAMS.pack(op) for op in ops])
+            covs.append([op["Q"] for op in ops])
+            self.extra.append(ops)
+        self.table = np.array(tables)  # (die, offset, param)
         self.cov = np.array(covs)
         self.spline = CubicSpline(grid, self.table, axis=0) if len(grid) > 1 else None
         self.cov_spline = CubicSpline(grid, self.cov, axis=0) if len(grid) > 1 else None
+        self.off_weights = CubicSpline(self.offsets, np.eye(len(self.offsets)), axis=0) \
+            if len(self.offsets) > 1 else None
 
-    def __call__(self, T: np.ndarray) -> np.ndarray:
-        """Packed parameters at each temperature; the noise factor is taken from the interpolated covariance
-        (covariances are smooth in T, their triangular factors need not be)."""
-        T = np.atleast_1d(T)
+    def nearest(self, T: float, offset: float = 0.0) -> dict:
+        """The averaged model's operating parameters at the grid node nearest ``T`` and ``offset``."""
+        return self.extra[int(np.argmin(np.abs(self.grid - T)))][int(np.argmin(np.abs(self.offsets - offset)))]
+
+    def _at(self, T: np.ndarray) -> tuple:
+        """Table and covariance at die temperatures ``T``, at every offset node."""
         if self.spline is None:
-            return np.repeat(self.table, len(T), axis=0)
-        P = self.spline(T)
-        P[:, PARAMS.slices["L"]] = batched_factor(self.cov_spline(T)).reshape(len(T), -1)
+            return np.repeat(self.table, len(T), axis=0), np.repeat(self.cov, len(T), axis=0)
+        return self.spline(T), self.cov_spline(T)
+
+    def __call__(self, T: np.ndarray, offset: np.ndarray | float = 0.0) -> np.ndarray:
+        """Packed parameters at each die temperature ``T`` and board-minus-die ``offset``; the noise factor is
+        taken from the interpolated covariance (covariances are smooth in T, their triangular factors need not be)."""
+        T = np.atleast_1d(T)
+        L = PARAMS.slices["L"]
+        if self.off_weights is None and self.spline is None:
+            return np.repeat(self.table[:, 0], len(T), axis=0)
+        if self.off_weights is None:  # the board follows the die at a fixed offset
+            P, cov = (x[:, 0] for x in self._at(T))
+            P[:, L] = batched_factor(cov).reshape(len(T), -1)
+            return P
+        W = self.off_weights(np.broadcast_to(np.asarray(offset, dtype=float), T.shape))
+        P = np.empty((len(T), self.table.shape[-1]))
+        for r0 in range(0, len(T), 4096):  # in chunks of rows: the (rows, offsets, params) values stay small
+            r = slice(r0, r0 + 4096)
+            tab, cov = self._at(T[r])
+            P[r] = np.einsum("ko,kop->kp", W[r], tab)
+            P[r, L] = batched_factor(np.einsum("ko,koij->kij", W[r], cov)).reshape(len(tab), -1)
         return P
 
 
@@ -95,17 +130,19 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     t_step = (np.arange(n_out_pad * Mo) + 1) * h
     t_blk = (np.arange(K) + 0.5) * nob * dt_out
     fx = EffectSet(scn.effects)
-    # die temperature (thermal lag) on a fine grid, then at the blocks
+    # die temperature (thermal lag) and board temperature (the case) on a fine grid, then at the blocks
     t_fine = np.linspace(0.0, t_out[-1], max(2, min(len(t_out), 200000)))
-    die_fine = fx.die_temperature(t_fine, np.asarray(scn.temperature(t_fine), dtype=float))
+    case_fine = np.asarray(scn.temperature(t_fine), dtype=float)
+    die_fine = fx.die_temperature(t_fine, case_fine)
     temp_blk = np.interp(t_blk, t_fine, die_fine)
+    off_blk = np.interp(t_blk, t_fine, fx.board_temperature(t_fine, case_fine) - die_fine)
     temp_all = np.interp(t_out, t_fine, die_fine)
     sig_fine = fx.signals(t_fine, die_fine)
     nz = scn.noise
     noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
     tab = _ParamTable(dev, h, noise_on, float(min(temp_blk.min(), temp_all.min())),
-                      float(max(temp_blk.max(), temp_all.max())))
-    P_all = tab(temp_blk)
+                      float(max(temp_blk.max(), temp_all.max())), float(off_blk.min()), float(off_blk.max()))
+    P_all = tab(temp_blk, off_blk)
     rng = np.random.default_rng(scn.seed)
     n_steps = len(t_step)
     phase = (noisegen.flicker(n_steps, 1.0 / h, dev.values["noise"]["flicker_phase_rad2"], rng)
@@ -118,7 +155,7 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     rate_step = np.deg2rad(np.asarray(scn.rate(t_step), dtype=float) + np.interp(t_step, t_fine, sig_fine["rate_dps"]))
     quad_step = np.interp(t_step, t_fine, sig_fine["quad_rel"])
     fac_step = np.asarray(scn.vref_factor(t_step), dtype=float)
-    x = _initial(scn, tab, temp_blk[0])
+    x = _initial(scn, tab, temp_blk[0], off_blk[0])
     roll = load_rollout(ENVELOPE_MODEL, log)
     any_noise = nz["brownian"] or nz["electronic"]
     blocks_per_call = max(1, int(round(CALL_S / (nob * dt_out))))
@@ -160,16 +197,16 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     info = dict(engine="envelope", step_s=h, steps_per_output=Mo, output_interval_s=dt_out,
                 nominal_scale_factor_V_per_dps=sf_nom, compiled=roll.compiled, compile_s=roll.compile_s,
                 wall_time_s=wall, simulated_time_s=float(t_out[-1]), temperature_grid_points=len(tab.grid),
+                board_offset_grid_points=len(tab.offsets),
                 steps_per_cycle=None)
     meta = {"device": dev.name, "source": "simulation", "engine": "envelope", "scenario": scn.name,
             "seed": str(scn.seed), "nominal_scale_factor_V_per_dps": f"{sf_nom:.9g}"}
     return SimResult(channels, internal, info, meta)
 
 
-def _initial(scn: Scenario, tab: _ParamTable, T0: float) -> np.ndarray:
+def _initial(scn: Scenario, tab: _ParamTable, T0: float, offset0: float = 0.0) -> np.ndarray:
     """Initial envelope state: at rest with the initial displacement, or on the averaged steady state."""
-    k = int(np.argmin(np.abs(tab.grid - T0)))
-    op = tab.extra[k]
+    op = tab.nearest(T0, offset0)
     ss = op["steady"]
     x = dict(x=np.zeros(N), u=0.0, w_rate=np.deg2rad(float(scn.rate(0.0))), vref_f=float(scn.vref_factor(0.0)), dkq=0.0,
              acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0, agc_V=0.0, freq_Hz=ss.f_Hz)
