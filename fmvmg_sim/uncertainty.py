@@ -49,7 +49,8 @@ class Knob:
         (value x (1 + x)), ``"abs"`` (value + x), ``"abs_all"`` (+ x on every path in ``paths``),
         ``"freq_rel"`` (both mode frequencies x (1 + x)), ``"trim_mrad"`` (demodulation phase trim + x
         mrad), ``"inv_rel"`` (value / (1 + x): a Q through its damping, which the AGC effort and the sense phase
-        follow linearly). On a recorded channel: ``"offset"`` (+ x), ``"gain"`` (x (1 + x)) and ``"delay"`` (the
+        follow linearly). On a recorded channel: ``"offset"`` (+ x), ``"gain"`` (x (1 + x)), ``"gain_tc"``
+        (x (1 + x (T - T0)), T the recorded temperature, T0 the device's reference) and ``"delay"`` (the
         temperature reading at time t is the temperature at t - x).
     paths : tuple of tuple of str
         Key paths into the device values (device knobs), or ``(("<channel>",),)`` (channel knobs).
@@ -130,6 +131,8 @@ KNOBS: tuple[Knob, ...] = (
        "drive-amplitude channel gain, relative"),
     _k("agc_effort_offset_V", "channel", "offset", [("agc_effort_V",)], 1e-4, "AGC-effort channel offset"),
     _k("agc_effort_gain_rel", "channel", "gain", [("agc_effort_V",)], 1e-4, "AGC-effort channel gain, relative"),
+    _k("agc_effort_tc_per_K", "channel", "gain_tc", [("agc_effort_V",)], 1e-6,
+       "AGC-effort channel gain temperature coefficient (the PI stage and its acquisition)"),
     _k("drive_frequency_offset_Hz", "channel", "offset", [("drive_frequency_Hz",)], 1e-3,
        "drive-frequency channel offset"),
     _k("drive_frequency_gain_rel", "channel", "gain", [("drive_frequency_Hz",)], 1e-7,
@@ -181,23 +184,27 @@ def law_curvature(device) -> float:
     return float(device.values.get("tolerance", {}).get(LAW_CURVATURE, 0.0))
 
 
-def apply_channels(values: dict, channels: dict) -> dict:
-    """Recorded channels through the channel knobs: ``(1 + gain) x + offset``, the temperature read late.
+def apply_channels(values: dict, channels: dict, reference_temperature_C: float = 25.0) -> dict:
+    """Recorded channels through the channel knobs: ``(1 + gain)(1 + tc (T - T0)) x + offset``, the temperature read
+    late.
 
     Parameters
     ----------
     values : dict
         ``{knob name: deviation}`` (device knobs are ignored).
     channels : dict
-        ``{channel: ndarray}`` of a record (``time_s`` needed for a temperature delay); channels no knob
-        names pass unchanged.
+        ``{channel: ndarray}`` of a record (``time_s`` needed for a temperature delay, ``temperature_C`` for a gain
+        temperature coefficient); channels no knob names pass unchanged.
+    reference_temperature_C : float, optional
+        ``T0`` of the gain temperature coefficients (the device's reference temperature).
 
     Returns
     -------
     dict
         New arrays for the channels a knob changed.
     """
-    gain, offset, delay = {}, {}, 0.0
+    by_kind = {"gain": {}, "offset": {}, "gain_tc": {}}
+    delay = 0.0
     for name, x in values.items():
         k = KNOBS_BY_NAME[name]
         if k.group != "channel" or x == 0.0:
@@ -205,11 +212,13 @@ def apply_channels(values: dict, channels: dict) -> dict:
         if k.kind == "delay":
             delay = float(x)
         else:
-            (gain if k.kind == "gain" else offset)[k.channel] = float(x)
+            by_kind[k.kind][k.channel] = float(x)
     out = dict(channels)
-    for c in set(gain) | set(offset):
+    dT = np.asarray(out.get("temperature_C", np.nan), dtype=float) - reference_temperature_C
+    for c in set().union(*by_kind.values()):
         if c in out:
-            out[c] = out[c] * (1.0 + gain.get(c, 0.0)) + offset.get(c, 0.0)
+            tc = by_kind["gain_tc"].get(c, 0.0) * dT if c in by_kind["gain_tc"] else 0.0
+            out[c] = out[c] * (1.0 + by_kind["gain"].get(c, 0.0)) * (1.0 + tc) + by_kind["offset"].get(c, 0.0)
     if delay and "temperature_C" in out:
         t = np.asarray(out["time_s"], dtype=float)
         out["temperature_C"] = np.interp(t - delay, t, np.asarray(out["temperature_C"], dtype=float))

@@ -83,5 +83,6 @@ rate_random_walk = {str(noise).lower()}
         scn.device = EffectSet(scn.effects).apply_to_device(apply_nominal(scn.device_nominal, theta))
     res = run_envelope(scn, progress=False)
     rec = tmp / f"{name}.csv"
-    write_record(rec, recorded(res.to_record(), theta or {}, nominal_scale_factor_V_per_dps(scn.device_nominal)))
+    write_record(rec, recorded(res.to_record(), theta or {}, nominal_scale_factor_V_per_dps(scn.device_nominal),
+                               scn.device_nominal.reference_temperature_C))
     return rec, res

@@ -173,8 +173,8 @@ def test_heating_minus_cooling_floor_is_the_chi_square_spread():
     (floor, k), = floors
     assert k >= 5 and abs(floor - np.sqrt(2.0 / k)) < 1e-12
     assert floor * 0.9 < np.std(logs) < floor * 2.0
-    # four replicates that agree by chance (log spread 0.14, as on benchmark case 66260/24, a null case):
-    # a 2.9x value was "located" without the floor, and is not with it
+    # four replicates that agree by chance (log spread 0.14) beside a null record: a 2.9x value is "located"
+    # without the floor, and is not with it
     name = "heating_minus_cooling_rate_V"
 
     def st(v, fl=True):

@@ -48,6 +48,10 @@ class Calibration:
         Table at the calibrated point.
     iterations : int
     solution : Solution
+    tolerance : dict
+        Each knob's tolerance.
+    objective : float
+        The calibration's objective at the calibrated unit (weighted squares of the training blocks plus the priors).
     """
 
     theta: dict
@@ -59,6 +63,7 @@ class Calibration:
     iterations: int
     solution: Solution
     tolerance: dict
+    objective: float = float("nan")
 
     @property
     def at_bound(self) -> list:
@@ -188,4 +193,4 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
             if abs(corr[i, j]) > CONFOUND_CORR:
                 pairs.append((knobs.names[i], knobs.names[j], float(corr[i, j])))
     sd = {n: float(sd_post[i]) for i, n in enumerate(knobs.names)}
-    return Calibration(theta, sd, ident, pairs, lin, base, it, sol, dict(zip(knobs.names, map(float, tolv))))
+    return Calibration(theta, sd, ident, pairs, lin, base, it, sol, dict(zip(knobs.names, map(float, tolv))), obj)

@@ -503,7 +503,8 @@ def prepare(record: Record, sf_nominal_V_per_dps: float, block_s: float = BLOCK_
         temp_s = temp
     start = t[0] - dt
     t_rel = t - start
-    first = np.concatenate([[dt], dts])
+    # each sample is a mean over its own sampling interval: after a gap (missing samples), not over the gap
+    first = np.minimum(np.concatenate([[dt], dts]), dt)
     t_mid = t_rel - 0.5 * first
     case_mid = np.interp(t_mid, t_rel, temp_s, left=temp_s[0])
     rate_true = np.nan_to_num(np.asarray(record.columns.get("rate_true_dps", np.zeros_like(t)), dtype=float))

@@ -342,7 +342,7 @@ def effect_limits(scorer: Scorer, name: str) -> dict:
         # parameter that is an effect of either sign; for one that cannot change sign (a feedthrough capacitance) the
         # mirrored column stands in for the knobs' room on their other side. A calibration that has already absorbed
         # part of an effect holds a knob at its bound on the effect's side, and the physical sign alone then reads
-        # a limit far too small (feedthroughs of signature SNR 0.3-1.5 missed at 1.3-22 times it, 90550-90551)
+        # a limit far too small
         signs = (1.0, -1.0)
         lims = [_solve_mde(lambda a, sg=sg: pw(sg * a), hi) for sg in signs]
         mde = None if any(v is None for v in lims) else max(lims)

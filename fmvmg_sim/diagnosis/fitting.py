@@ -134,11 +134,16 @@ class Fitter:
         A store of response tables shared with other Fitters. A table depends only on the device, the
         temperature grid and its inputs, so Fitters on records of one profile (several simulations of the same
         oven and rate table) reuse each other's tables; the store keeps each device it holds tables of.
+    quadrature_polarity : float, optional
+        +1 or -1: the sign the record's quadrature output carries against the device's (which way the quadrature
+        reference is wired; the demodulated outputs turn the other way with the phase error under the other sign).
     """
 
-    def __init__(self, prep: Prepared, device, tables: dict | None = None):
+    def __init__(self, prep: Prepared, device, tables: dict | None = None, quadrature_polarity: float = 1.0):
         self.prep = prep
         self.device0 = device
+        #: Sign of the recorded quadrature output against the device's (the quadrature reference's wiring)
+        self.quadrature_polarity = float(quadrature_polarity)
         self.Y = prep.block_obs()
         self.S = prep.block_sigma()
         #: Blocks where the applied rate changes (and the next): the quasi-static model does not
@@ -157,6 +162,8 @@ class Fitter:
         #: How much later than the channels the temperature is read (s): the model's input is the reading
         #: this much later (the calibrated ``temperature_delay_s``)
         self.delay_s = 0.0
+        #: Each block's recorded temperature from the device's reference (the channels' gain coefficients)
+        self._dT_b = np.nan_to_num(prep.block_mean(prep.case_C) - device.reference_temperature_C)
         self._nom_jac = None
         self._nom_jac_board = None
         self._nom_jac_theta = None
@@ -236,7 +243,8 @@ class Fitter:
         return {k.name for k, _ in self._chan}
 
     def channel_gains(self, theta: dict) -> np.ndarray:
-        """``1 + gain`` of each channel at ``theta`` (1 where no gain knob acts), shape (C,).
+        """``(1 + gain)(1 + tc (T - T0))`` of each channel on each block at ``theta`` (1 where no gain knob acts),
+        the quadrature output's times its polarity.
 
         Parameters
         ----------
@@ -244,12 +252,15 @@ class Fitter:
 
         Returns
         -------
-        ndarray
+        ndarray, shape (n_blocks, C)
         """
-        g = np.ones(len(CHANNELS))
+        g = np.ones((self.prep.n_blocks, len(CHANNELS)))
+        g[:, CHANNELS.index("quadrature_V")] = self.quadrature_polarity
         for k, c in self._chan:
             if k.kind == "gain":
-                g[c] += theta.get(k.name, 0.0)
+                g[:, c] += g[:, c] * theta.get(k.name, 0.0)
+            elif k.kind == "gain_tc":
+                g[:, c] += g[:, c] * theta.get(k.name, 0.0) * self._dT_b
         return g
 
     def through_channels(self, theta: dict, raw: np.ndarray) -> np.ndarray:
@@ -264,7 +275,7 @@ class Fitter:
         -------
         ndarray
         """
-        y = raw * self.channel_gains(theta)[None, :]
+        y = raw * self.channel_gains(theta)
         for k, c in self._chan:
             if k.kind == "offset":
                 y[:, c] += theta.get(k.name, 0.0)
@@ -395,15 +406,16 @@ class Fitter:
         for k in self.knobs.knobs:
             if k.on_device:
                 j = next(dev)
-                cols.append(j.evaluate(die, rate, None, board if j.d_board is not None else None) * gain[None, :])
+                cols.append(j.evaluate(die, rate, None, board if j.d_board is not None else None) * gain)
                 continue
             if k.kind == "delay":
                 # read d later, the temperature the channels saw is the reading plus d dT/dt
-                cols.append(np.nan_to_num(base.slope(die)) * (path["dTdt_b"] / 60.0)[:, None] * gain[None, :])
+                cols.append(np.nan_to_num(base.slope(die)) * (path["dTdt_b"] / 60.0)[:, None] * gain)
                 continue
             col = np.zeros_like(raw)
             c = CHANNELS.index(k.channel)
-            col[:, c] = raw[:, c] if k.kind == "gain" else 1.0
+            sign = self.quadrature_polarity if k.channel == "quadrature_V" else 1.0
+            col[:, c] = {"gain": sign * raw[:, c], "gain_tc": sign * raw[:, c] * self._dT_b}.get(k.kind, 1.0)
             cols.append(col)
         ks = self.knobs
         return Lin(y0, np.stack(cols, axis=-1), ks.names, np.array([theta.get(n, 0.0) for n in ks.names]),

@@ -214,7 +214,7 @@ class EffectModel:
             hi.append(MODELS[n_][p_].hi)
         if cols:
             # through the calibrated channel gains, as the nominal columns are
-            C = np.stack(cols, axis=-1) * self.f.channel_gains(self.theta)[None, :, None]
+            C = np.stack(cols, axis=-1) * self.f.channel_gains(self.theta)[:, :, None]
             lin = Lin(lin.y0, np.concatenate([lin.cols, C], axis=-1), lin.names + names,
                       np.concatenate([lin.x0, x0]),
                       np.concatenate([lin.prior_sd, [effect_prior_sd(*nm.split(".")) for nm in names]]),
@@ -309,7 +309,7 @@ class EffectModel:
         mf._ctx["refit"] = refit
         mf._ctx["pred"] = lin.predict(sol.x)
         # the training cost with a nonlinear parameter held elsewhere (the linear ones re-solved): how hard the
-        # data pull it to where it was fitted (attribute.bounds_verdict, the attribution floor)
+        # data pull it to where it was fitted (evaluation.bounds_verdict, the attribution floor)
         mf._ctx["cost_at"] = lambda over, r: self.f.solve(self._lin({**nl, **over}), r).cost
         return mf
 

@@ -211,7 +211,7 @@ def simulate_null(scn, fitter: Fitter, cal: Calibration, n: int, seed: int, prog
     thetas = posterior_draws(cal, n, seed)
     raw = []
     records = loc.null_records(scn, [fitter.device(th) for th in thetas], prep, seed, progress=progress, raw=raw,
-                               knobs=thetas, delay_s=fitter.delay_s)
+                               knobs=thetas, delay_s=fitter.delay_s, quadrature_polarity=fitter.quadrature_polarity)
     die_b = fitter.path(None)["die_b"]
     preds = [fitter.through_channels(th, fitter.table(th).evaluate(die_b, fitter.rate_b)) for th in thetas]
     fitter.set_converter(converter_model(prep, raw, preds))

@@ -51,7 +51,7 @@ BIAS_SCALE_MAX = 30.0
 #: Factor within which a record's auxiliary channel must match the device's magnitude.
 MAGNITUDE_FACTOR = 30.0
 
-__all__ = ["N_NULL", "diagnose", "load_inputs", "localise", "record_scale_factor", "nominal_device", "check_units"]
+__all__ = ["N_NULL", "diagnose", "load_inputs", "calibrated", "localise", "record_scale_factor", "check_units"]
 
 
 def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, progress: bool | None = None,
@@ -92,10 +92,10 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
 def _diagnose(record_path, scenario_path, n_null: int, seed: int, progress, log) -> dict:
     """:func:`diagnose`'s stages."""
     wall0 = time.perf_counter()
-    scn, prep, fitter = load_inputs(record_path, scenario_path)
+    scn, prep = load_inputs(record_path, scenario_path)
     show = progress if progress is not None else prep.duration_s > 4 * 3600
     train = prep.folds()[-1]["train"]
-    cal = calibrate(fitter, train)
+    fitter, cal = calibrated(prep, scn.device_nominal, train)
     die_b = fitter.path(None)["die_b"]
     fitter.set_score_floor(cal.base, die_b, DIE_FLOOR_K)
     fitter.set_law_accuracy(cal.base, die_b, train)
@@ -127,7 +127,7 @@ def _diagnose(record_path, scenario_path, n_null: int, seed: int, progress, log)
 
 
 def load_inputs(record_path, scenario_path) -> tuple:
-    """Read the record and the scenario, check them against each other, and prepare the fitter.
+    """Read the record and the scenario and check them against each other.
 
     Parameters
     ----------
@@ -137,8 +137,6 @@ def load_inputs(record_path, scenario_path) -> tuple:
     -------
     scenario : Scenario
     prep : Prepared
-    fitter : Fitter
-        On the nominal device whose quadrature sign the record shows (:func:`nominal_device`).
 
     Raises
     ------
@@ -147,10 +145,64 @@ def load_inputs(record_path, scenario_path) -> tuple:
     scn = load_scenario(scenario_path)
     rec = read_record(record_path)
     prep = prepare(rec, record_scale_factor(rec, scn.device_nominal))
-    fitter = Fitter(prep, nominal_device(prep, scn.device_nominal))
-    nominal_pred = fitter.table({}).evaluate(fitter.path(None)["die_b"], fitter.rate_b)
-    check_units(rec, prep, nominal_pred)
-    return scn, prep, fitter
+    fitter = Fitter(prep, scn.device_nominal)
+    check_units(rec, prep, fitter.table({}).evaluate(fitter.path(None)["die_b"], fitter.rate_b))
+    return scn, prep
+
+
+def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
+    """The nominal model calibrated on the training window, in the quadrature convention the record shows.
+
+    A unit's quadrature coupling has either sign, and the record's quadrature output either polarity (which way
+    its reference is wired): the two combinations that give the quadrature output the record's sign
+    (:func:`quadrature_conventions`) turn the demodulated outputs the opposite ways with the phase error, so that
+    the bias the quadrature leaks has the one sign or the other. Each is calibrated, and the one that fits the
+    training window better is kept.
+
+    Parameters
+    ----------
+    prep : Prepared
+    device : Device
+        The scenario's nominal device.
+    train : ndarray of bool
+
+    Returns
+    -------
+    fitter : Fitter
+    cal : Calibration
+    """
+    best = None
+    for dev, polarity in quadrature_conventions(prep, device):
+        f = Fitter(prep, dev, quadrature_polarity=polarity)
+        cal = calibrate(f, train)
+        if best is None or cal.objective < best[1].objective:
+            best = (f, cal)
+    f, cal = best
+    f.delay_s = cal.theta.get("temperature_delay_s", 0.0)
+    return f, cal
+
+
+def quadrature_conventions(prep: Prepared, device) -> list:
+    """The quadrature sign and output polarity combinations that give the record's quadrature output its sign.
+
+    Parameters
+    ----------
+    prep : Prepared
+    device : Device
+
+    Returns
+    -------
+    list of (Device, float)
+        ``(device, polarity)``: the device as it is or with its quadrature coupling of the other sign, and the
+        output's polarity (+1 or -1); one combination without a quadrature channel.
+    """
+    if "quadrature_V" not in prep.channels:
+        return [(device, 1.0)]
+    fit = Fitter(prep, device)
+    pred = fit.table({}).evaluate(fit.path(None)["die_b"])[:, IQUAD]
+    same = np.sign(np.nanmedian(prep.block_obs()[:, IQUAD])) * np.sign(np.nanmedian(pred)) >= 0
+    flipped = flip_quadrature(device)
+    return [(device, 1.0), (flipped, -1.0)] if same else [(flipped, 1.0), (device, -1.0)]
 
 
 def record_scale_factor(rec: Record, device) -> float:
@@ -173,32 +225,6 @@ def record_scale_factor(rec: Record, device) -> float:
     except ValueError:
         sf = float("nan")
     return sf if np.isfinite(sf) and sf != 0.0 else nominal_scale_factor_V_per_dps(device)
-
-
-def nominal_device(prep: Prepared, device):
-    """The nominal device with its quadrature coupling of the sign the record's quadrature output shows.
-
-    A unit's quadrature (its mechanical imbalance) has either sign; its size is a tolerance
-    (``quadrature_rel``), its sign is read from the record: the median quadrature output against the
-    nominal device's at the record's temperatures.
-
-    Parameters
-    ----------
-    prep : Prepared
-    device : Device
-
-    Returns
-    -------
-    Device
-    """
-    if "quadrature_V" not in prep.channels:
-        return device
-    fit = Fitter(prep, device)
-    pred = fit.table({}).evaluate(fit.path(None)["die_b"])[:, IQUAD]
-    meas = prep.block_obs()[:, IQUAD]
-    if np.sign(np.nanmedian(meas)) * np.sign(np.nanmedian(pred)) < 0:
-        return flip_quadrature(device)
-    return device
 
 
 def check_units(rec: Record, prep: Prepared, nominal_pred: np.ndarray) -> None:

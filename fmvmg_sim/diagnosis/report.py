@@ -143,8 +143,10 @@ def calibration_lines(cal: dict) -> list[str]:
                  f"| {_fmt(v.get('sd_calibrated'), '.2g')} | {_fmt(v['value'], '.4g')} | {_fmt(v['tolerance'], '.3g')} "
                  f"| {'yes' if v['identifiable'] else 'no'} | {note} |")
     if cal.get("quadrature_sign", 1.0) < 0:
-        L += ["", "The record's quadrature output has the sign opposite to the device file's: the quadrature coupling "
-              "is calibrated with that sign."]
+        L += ["", "The unit's quadrature coupling has the sign opposite to the device file's."]
+    if cal.get("quadrature_polarity", 1.0) < 0:
+        L += ["", "The record's quadrature output has the opposite polarity to the simulator's (its reference wired the "
+              "other way): the bias the quadrature leaks through the phase error turns with it."]
     if cal.get("not_identifiable"):
         L += ["", f"Not identifiable from this record (their posterior is not much narrower than their tolerance): "
               f"{', '.join(cal['not_identifiable'])}."]
@@ -281,7 +283,7 @@ def markdown(rep: dict) -> str:
 
 def _coverage_lines(r: dict, settings: dict, design: dict | None = None) -> list[str]:
     """The folds' training and held-out temperatures, where the held-out data extrapolate, and what a record
-    held at one temperature cannot identify (``design``, :func:`~.pipeline.design_check`), and whether what the
+    held at one temperature cannot identify (``design``, :func:`design_check`), and whether what the
     model leaves lies after the last training window only (``design["gap_after_training"]``,
     :func:`~.windows.after_training_note`)."""
     folds = r.get("folds") or []
@@ -477,6 +479,33 @@ def assemble(*, record_path, prep, fitter, cal, null, where, scorer, att, quant,
              verdict, limits, n_null, seed, wall_s) -> dict:
     """The report of one diagnosis from its stages' results (:mod:`.pipeline`).
 
+    Parameters
+    ----------
+    record_path : path-like
+    prep : Prepared
+    fitter : Fitter
+    cal : Calibration
+    null : Null
+    where : Localisation
+    scorer : Scorer
+    att : Attribution
+        The decided attribution (:func:`.attribution.attribute`).
+    quant : dict or None
+        A coarser converter (:func:`.noise_effects.quantization_candidate`).
+    band : dict
+        The flicker band of the final model (:meth:`.noise_effects.FlickerBand.judge`).
+    flick_ok : bool
+        Whether extra flicker is accepted.
+    accepted : list of str
+    closure : dict or None
+        Whether the accepted model closes the located gap (:func:`.localize.closure`).
+    verdict : Verdict
+    limits : dict
+        Detection limits (:func:`.detection.detection_limits`).
+    n_null, seed : int
+    wall_s : float
+        Wall time of the diagnosis so far.
+
     Returns
     -------
     dict
@@ -574,6 +603,7 @@ def assemble(*, record_path, prep, fitter, cal, null, where, scorer, att, quant,
     quad_nominal = float(np.sign(fitter.device0.values["mechanics"]["quadrature_rate_dps"]))
     calib = cal.to_json(device)
     calib["quadrature_sign"] = quad_nominal
+    calib["quadrature_polarity"] = fitter.quadrature_polarity
     calib["temperature_delay_s"] = fitter.delay_s
     folds = prep.folds()
     report = {

@@ -328,11 +328,12 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     (out / "labels").mkdir(parents=True, exist_ok=True)
     path = out / "cases" / f"case_{k:04d}.csv"
     sf_nominal = nominal_scale_factor_V_per_dps(scn.device_nominal)
+    t_ref = scn.device_nominal.reference_temperature_C
 
     def simulate(eff):
         s.device = EffectSet(eff).apply_to_device(apply_nominal(unit, theta))
         s.effects = eff
-        rec = recorded(run_envelope(s, progress=False, log=lambda m: None).to_record(), theta, sf_nominal)
+        rec = recorded(run_envelope(s, progress=False, log=lambda m: None).to_record(), theta, sf_nominal, t_ref)
         rec.metadata = {"device": scn.device.name, "source": "diagnose-benchmark case"}
         write_record(path, rec)
 
@@ -350,7 +351,8 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     twin.settings["scenario"]["seed"] = int(rng.integers(0, 2 ** 31))
     twin.device = EffectSet(noise_eff).apply_to_device(apply_nominal(unit, theta))
     twin.effects = noise_eff
-    noise = noise_model(recorded(run_envelope(twin, progress=False, log=lambda m: None).to_record(), theta, sf_nominal),
+    noise = noise_model(recorded(run_envelope(twin, progress=False, log=lambda m: None).to_record(), theta, sf_nominal,
+                                 t_ref),
                         unit, theta)
     eff = validate_effects(drawn, "case")
     simulate(eff)
@@ -390,7 +392,7 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     return label
 
 
-def recorded(rec, theta: dict, sf_nominal: float):
+def recorded(rec, theta: dict, sf_nominal: float, reference_temperature_C: float = 25.0):
     """A simulated record as the unit's data acquisition writes it: through the channel knobs of ``theta``
     (:func:`fmvmg_sim.uncertainty.apply_channels`), ``rate_dps`` the rate output over the nominal scale factor.
 
@@ -399,12 +401,15 @@ def recorded(rec, theta: dict, sf_nominal: float):
     rec : Record
     theta : dict
     sf_nominal : float
+    reference_temperature_C : float, optional
+        The device's (the channels' gain coefficients are about it).
 
     Returns
     -------
     Record
     """
-    cols = apply_channels(theta, {c: np.asarray(v, dtype=float) for c, v in rec.columns.items()})
+    cols = apply_channels(theta, {c: np.asarray(v, dtype=float) for c, v in rec.columns.items()},
+                          reference_temperature_C)
     cols["rate_dps"] = cols["rate_V"] / sf_nominal
     return type(rec)(cols, rec.metadata, rec.path)
 
