@@ -152,6 +152,43 @@ class TwoModeResonator(LinearBlock):
         kT4 = 4 * K_BOLTZMANN * self.temperature_K
         return kT4 * self.c_drive_N_s_per_m, kT4 * self.c_sense_N_s_per_m
 
+    def envelope_mode(self, mode: str, omega_rad_s: float) -> tuple[complex, complex, complex]:
+        """Envelope face of one mode at ``omega_rad_s``: its exact slow pole, residue and feedthrough.
+
+        With ``y = Re(Y e^{i w t})`` and a slowly varying force phasor ``F``, the mode
+        ``m y'' + c y' + k y = Re(F e^{i w t})`` gives ``m Y'' + (2 i w m + c) Y' + Z Y = F``,
+        ``Z = k - m w^2 + i w c``: at baseband ``Y = F / (m (s - s1)(s - s2))`` with the slow
+        pole ``s1 = -c/(2m) + i (w_n' - w)`` and the fast one ``s2 = -c/(2m) - i (w_n' + w)``
+        (``w_n' = sqrt(k/m - c^2/(4 m^2))``, the damped natural frequency). Envelope frequencies
+        are far below ``|s2| ~ 2 w``, so the fast pole reduces to a feedthrough:
+        ``Y = Y_s + d F``, ``Y_s' = s1 Y_s + r F``, ``r = 1 / (m (s1 - s2))``, ``d = r / s2``,
+        exact in the ringing frequency, decay time constant and static gain, and in the
+        response to the order of ``(s / 2w)^2``. (The first-order envelope ``Y' = (F - Z Y)/(2 i w m + c)``
+        puts the pole at ``(w_n^2 - w^2)/(2 w)``, off by ``(w_n - w)/(2 w)``, 0.2 % at a 146 Hz split.)
+
+        Parameters
+        ----------
+        mode : {"drive", "sense"}
+        omega_rad_s : float
+            Frequency of the envelope's reference frame.
+
+        Returns
+        -------
+        tuple of complex
+            ``(s1, r, d)``: slow pole (1/s), residue (m/(N s)) and feedthrough (m/N).
+        """
+        if mode == "drive":
+            m, k, c = self.m_drive_kg, self.k_drive_N_per_m, self.c_drive_N_s_per_m
+        elif mode == "sense":
+            m, k, c = self.m_sense_kg, self.k_sense_N_per_m, self.c_sense_N_s_per_m
+        else:
+            raise ValueError(f"mode must be 'drive' or 'sense', got {mode!r}")
+        wd = np.sqrt(k / m - (c / (2 * m)) ** 2)
+        s1 = complex(-c / (2 * m), wd - omega_rad_s)
+        s2 = complex(-c / (2 * m), -(wd + omega_rad_s))
+        r = 1.0 / (m * (s1 - s2))
+        return s1, r, r / s2
+
     def duffing_stiffness(self, amplitude_m: float) -> float:
         """Describing-function stiffness of the cubic term: (3/4) k3 A^2 (N/m).
 

@@ -45,6 +45,9 @@ class SteadyState:
         (predicts ``f = f_d (1 + tan(delta) / (2 Q_d))``).
     X, Y, V_s, R_I, R_Q : complex
         Phasors of drive and sense displacement, sense-chain output and the references.
+    agc_saturated : bool
+        The effort the set-point needs is beyond the PI's output limits: the PI sits at the limit
+        and the amplitude settles where that effort holds it (below the set-point).
     """
 
     omega_rad_s: float
@@ -61,6 +64,7 @@ class SteadyState:
     V_s: complex
     R_I: complex
     R_Q: complex
+    agc_saturated: bool = False
 
 
 def _fundamental(samples: np.ndarray) -> complex:
@@ -191,16 +195,18 @@ def _chain(dg: Diagram, omega: float) -> tuple:
     return dg.drive_chain_response(omega), dg.phase_shifter_response(omega)
 
 
-def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float, chain: tuple | None = None):
+def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float, chain: tuple | None = None,
+          ripple: bool = True):
     """Complex AGC effort that holds a drive amplitude ``A`` at ``omega`` (real at the oscillation frequency);
-    ``chain`` is :func:`_chain` at ``omega`` when already evaluated."""
+    ``chain`` is :func:`_chain` at ``omega`` when already evaluated; ``ripple=False`` when the PI is clamped
+    (the rectifier ripple does not pass a clamped output)."""
     Hx, Hps = _chain(dg, omega) if chain is None else chain
     V_x, V_ps = Hx * A, Hx * Hps * A
     carrier, R_I, R_Q = carrier_phasors(dg, V_x, V_ps)
     z1 = drive_response(dg, omega, rate_rad_s, dg.resonator.duffing_stiffness(A))
     F = A / z1[0]
     V_ac = F / dg.comb_drive.linear_coef_N_per_V
-    U2 = ripple_feedback(dg, omega, V_ps)
+    U2 = ripple_feedback(dg, omega, V_ps) if ripple else 0.0
     u = (V_ac / dg.modulator.k_per_V - 0.5 * U2 * np.conj(carrier)) / carrier
     return u, dict(V_x=V_x, V_ps=V_ps, carrier=carrier, R_I=R_I, R_Q=R_Q, z1=z1, F=F, V_ac=V_ac)
 
@@ -229,18 +235,51 @@ def oscillation_frequency(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | 
         rad/s.
     """
     vref = dg.vref_V if vref_V is None else vref_V
-    w0 = dg.omega_drive_rad_s
-    span = max(20.0 / dg.resonator.q_drive, 1e-4)
 
     def imag_u(w):
         chain = _chain(dg, w)
         return _loop(dg, w, _amplitude(dg, w, vref, chain), rate_rad_s, chain)[0].imag
 
+    return _phase_balance(dg, imag_u)
+
+
+def _phase_balance(dg: Diagram, imag_u) -> float:
+    """The frequency near the drive mode where ``imag_u`` (the AGC effort's imaginary part) vanishes."""
+    w0 = dg.omega_drive_rad_s
+    span = max(20.0 / dg.resonator.q_drive, 1e-4)
     return float(brentq(imag_u, w0 * (1 - span), w0 * (1 + span), xtol=1e-9, rtol=1e-15))
+
+
+def _clamped(dg: Diagram, rate_rad_s: float, u_V: float, A_set: float) -> tuple[float, float]:
+    """Frequency and amplitude at which the loop holds itself with the PI output fixed at ``u_V``.
+
+    The phase balances where the effort's imaginary part vanishes; the amplitude where its real part is
+    ``u_V`` (proportional to the amplitude for a linear resonator, so one bracket around the set-point's
+    amplitude scaled by the effort ratio holds it).
+    """
+    def freq(A):
+        return _phase_balance(dg, lambda w: _loop(dg, w, A, rate_rad_s, ripple=False)[0].imag)
+
+    def excess(A):
+        return _loop(dg, freq(A), A, rate_rad_s, ripple=False)[0].real - u_V
+
+    u_set = _loop(dg, freq(A_set), A_set, rate_rad_s, ripple=False)[0].real
+    guess = A_set * u_V / u_set
+    lo, hi = 0.5 * guess, 2.0 * guess
+    while excess(lo) > 0 and lo > 1e-6 * guess:
+        lo *= 0.5
+    while excess(hi) < 0 and hi < 1e6 * guess:
+        hi *= 2.0
+    A = float(brentq(excess, lo, hi, xtol=1e-18, rtol=1e-13))
+    return freq(A), A
 
 
 def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = None) -> SteadyState:
     """The periodic steady state of the closed loop at ``rate_rad_s``.
+
+    Where holding the set-point would need an AGC effort beyond the PI's output limits, the PI
+    sits at the limit (its integrator held by the anti-windup) and the amplitude settles where
+    that effort holds it: ``agc_saturated`` is set and the amplitude is below the set-point.
 
     Parameters
     ----------
@@ -259,9 +298,16 @@ def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = No
     chain = _chain(dg, w)
     A = _amplitude(dg, w, vref, chain)
     u, p = _loop(dg, w, A, rate_rad_s, chain)
+    u_lim = dg.pi.u_max_V if u.real > dg.pi.u_max_V else (dg.pi.u_min_V if u.real < dg.pi.u_min_V else None)
+    saturated = u_lim is not None and u_lim > 0  # a limit at or below zero cannot hold an oscillation
+    if saturated:
+        w, A = _clamped(dg, rate_rad_s, u_lim, A)
+        u, p = _loop(dg, w, A, rate_rad_s, ripple=False)
+        u = complex(u_lim, 0.0)
     X = complex(A)  # the phase reference is the drive displacement
     Y = p["z1"][2] * p["F"]
-    V_ac = dg.modulator.k_per_V * (u.real * p["carrier"] + 0.5 * ripple_feedback(dg, w, p["V_ps"]) * np.conj(p["carrier"]))
+    ripple = 0.0 if saturated else ripple_feedback(dg, w, p["V_ps"])
+    V_ac = dg.modulator.k_per_V * (u.real * p["carrier"] + 0.5 * ripple * np.conj(p["carrier"]))
     sp = dg.sense_pickoff
     V_s = dg.sense_amps_response(w) * (sp.gain_V_per_m * Y + sp.c_feedthrough_F / sp.c_feedback_F * V_ac)
     k_out = dg.output_lpf.gain
@@ -270,7 +316,7 @@ def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = No
     return SteadyState(omega_rad_s=w, f_Hz=w / (2 * np.pi), amplitude_m=A, v_ps_amplitude_V=abs(p["V_ps"]),
                        agc_effort_V=float(u.real), modulator_gain=float(abs(p["V_ac"]) / abs(p["V_ps"])),
                        rate_V=float(rate_V), quadrature_V=float(quad_V), loop_phase_error_rad=loop_phase_error(dg),
-                       X=X, Y=complex(Y), V_s=complex(V_s), R_I=p["R_I"], R_Q=p["R_Q"])
+                       X=X, Y=complex(Y), V_s=complex(V_s), R_I=p["R_I"], R_Q=p["R_Q"], agc_saturated=saturated)
 
 
 def scale_factor_V_per_dps(dg: Diagram) -> float:

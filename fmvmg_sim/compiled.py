@@ -16,6 +16,10 @@ that
 The arithmetic of each unit is the expression graph's, operation by operation, so a
 unit gives the same numbers alone or among others.
 
+A model may also give a :class:`Refinement`: the roll-out redoes the steps its step function
+flags (a piecewise-linear model crossing from one piece into another) in sub-steps of a second
+function, generated the same way and called only for those steps.
+
 Libraries are cached under ``$FMVMG_CACHE_DIR`` (default ``~/.cache/fmvmg_sim``),
 keyed by a hash of the C source, the compiler command and the CPU; the file name also
 carries the SHA-256 of the library itself, written in one atomic rename. An entry is
@@ -42,6 +46,8 @@ from typing import Callable
 
 import casadi as ca
 import numpy as np
+
+from blocks.ops import numpy_ops
 
 from .carrier.layout import Layout
 
@@ -205,6 +211,28 @@ EXPORT int PREFIX_rollout_c(long L, const double* x0, const double* P, const dou
 }
 """
 
+#: Where a refined model's roll-out checks each step's flag (after the step, before the state swap).
+_REFINE_ANCHOR = "          double* t = xa; xa = xb; xb = t;\n"
+_REFINE_CALL = """          for (long l = 0; l < vw; ++l)  /* flagged steps are redone in sub-steps, lane by lane */
+            if (xb[FLAG_IDX * vw + l] != 0.0) PREFIX_refine(xa, p, w, xb, vw, l);
+"""
+#: The refinement of one lane's step: ``NSUB`` sub-steps from the step's start state (contiguous copies).
+_REFINE_FN = r"""
+static __attribute__((noinline)) void PREFIX_refine(const double* x, const double* p, const double* w, double* y,
+                                                    const long V_, const long l) {
+  double xl[NX], yl[NX], wl[NW + 1], pl[NP];
+  for (int i = 0; i < NX; ++i) xl[i] = x[i * V_ + l];
+  for (int i = 0; i < NP; ++i) pl[i] = p[i * V_ + l];
+  for (int i = 0; i < NW; ++i) wl[i] = w[i * V_ + l];
+  for (int j = 0; j < NSUB; ++j) {
+    wl[NW] = (double) j;
+    PREFIX_sub(xl, pl, wl, yl, 1, 0);
+    memcpy(xl, yl, sizeof(double) * NX);
+  }
+  for (int i = 0; i < NX; ++i) y[i * V_ + l] = xl[i];
+}
+"""
+
 # C of each CasADi operation (CasADi's own codegen semantics, operation by operation)
 _UNARY = {
     "OP_ASSIGN": "{0}", "OP_NEG": "(-{0})", "OP_SQ": "({0}*{0})", "OP_TWICE": "(2.*{0})", "OP_INV": "(1./{0})",
@@ -234,7 +262,11 @@ def _c_literal(v: float) -> str:
 
 def _step_c(model: "StepModel") -> str:
     """The model's step as an inline C function of one lane (unit ``l`` of ``L``, unit-minor arrays)."""
-    f = model.casadi_function()
+    return _function_c(model, model.casadi_function(), "PREFIX_step")
+
+
+def _function_c(model: "StepModel", f: ca.Function, c_name: str) -> str:
+    """A CasADi function of ``(x, p, w)`` as an inline C function of one lane."""
     arrays = ("x", "p", "w")
     body = []
     for k in range(f.n_instructions()):
@@ -254,7 +286,7 @@ def _step_c(model: "StepModel") -> str:
             raise NotImplementedError(f"{model.name}: CasADi operation {op} has no C form here")
     n_work = max(1, f.sz_w())
     decl = "  double " + ", ".join(f"w{j}" for j in range(n_work)) + ";"
-    return ("static inline __attribute__((always_inline)) void PREFIX_step(const double* restrict x, "
+    return (f"static inline __attribute__((always_inline)) void {c_name}(const double* restrict x, "
             "const double* restrict p, const double* restrict w, double* restrict y, const long L, const long l) {\n"
             + decl + "\n" + "\n".join(body) + "\n}\n")
 
@@ -278,6 +310,32 @@ class CasadiOps:
 
 
 @dataclass(frozen=True)
+class Refinement:
+    """A finer update of the steps the step function flags: ``n_sub`` sub-steps in a row.
+
+    A piecewise-linear model (a clamped controller, a gain that changes with the state)
+    advances with one exact discretisation per step while it stays in one piece; a step that
+    crosses into another piece sets the flag, and the roll-out redoes that step from its start
+    state with ``n_sub`` calls of ``substep``, each deciding its piece afresh. The flagged steps
+    are few (the crossings), so the fine path costs little however long it is.
+
+    Parameters
+    ----------
+    substep : callable
+        ``substep(x, p, w_j, ops) -> list``: the state after sub-step ``j``, where ``w_j`` is the
+        step's input vector with ``j`` (0 .. n_sub - 1) appended.
+    n_sub : int
+        Sub-steps per refined step.
+    flag : str
+        Scalar state field the step function sets non-zero to have its step refined.
+    """
+
+    substep: Callable
+    n_sub: int
+    flag: str
+
+
+@dataclass(frozen=True)
 class StepModel:
     """A step function with its layouts.
 
@@ -293,6 +351,8 @@ class StepModel:
         ``step(x, p, w, ops) -> list`` (the next state).
     reset : tuple of str
         State fields zeroed after each output sample (accumulators of integrate-and-dump outputs).
+    refine : Refinement, optional
+        The finer update of flagged steps.
     """
 
     name: str
@@ -301,6 +361,29 @@ class StepModel:
     n_inputs: int
     step: Callable
     reset: tuple = ()
+    refine: Refinement | None = None
+
+    def advance(self, x, p, w) -> np.ndarray:
+        """One step in numpy, refined where the step function flags it (what the roll-out does).
+
+        Parameters
+        ----------
+        x, p, w : array_like
+            State, parameters and the step's inputs.
+
+        Returns
+        -------
+        ndarray
+            The next state.
+        """
+        y = np.asarray(self.step(list(x), list(p), list(w), numpy_ops), dtype=float)
+        r = self.refine
+        if r is None or y[self.state.slices[r.flag].start] == 0:
+            return y
+        xs = list(x)
+        for j in range(r.n_sub):
+            xs = r.substep(xs, list(p), list(w) + [float(j)], numpy_ops)
+        return np.asarray(xs, dtype=float)
 
     def reset_indices(self) -> list[int]:
         """Flat state indices of the :attr:`reset` fields.
@@ -322,12 +405,47 @@ class StepModel:
         -------
         casadi.Function
         """
+        return self._symbolic(self.step, self.n_inputs, "step")
+
+    def casadi_substep(self) -> ca.Function:
+        """The symbolic sub-step of :attr:`refine` (inputs extended by the sub-step index).
+
+        Returns
+        -------
+        casadi.Function
+        """
+        return self._symbolic(self.refine.substep, self.n_inputs + 1, "sub")
+
+    def _symbolic(self, fn: Callable, n_inputs: int, suffix: str) -> ca.Function:
+        """``fn(x, p, w, ops)`` built with CasADi symbols as ``<name>_<suffix>(x, p, w)``."""
         x = ca.SX.sym("x", self.state.size)
         p = ca.SX.sym("p", self.params.size)
-        w = ca.SX.sym("w", self.n_inputs)
-        out = self.step([x[i] for i in range(self.state.size)], [p[i] for i in range(self.params.size)],
-                        [w[i] for i in range(self.n_inputs)], CasadiOps())
-        return ca.Function(f"{self.name}_step", [x, p, w], [ca.vertcat(*out)])
+        w = ca.SX.sym("w", n_inputs)
+        out = fn([x[i] for i in range(self.state.size)], [p[i] for i in range(self.params.size)],
+                 [w[i] for i in range(n_inputs)], CasadiOps())
+        return ca.Function(f"{self.name}_{suffix}", [x, p, w], [ca.vertcat(*out)])
+
+    def refined_function(self) -> ca.Function:
+        """The step with its refinement as one function (for the virtual machine): the flagged
+        branch is evaluated only when taken.
+
+        Returns
+        -------
+        casadi.Function
+        """
+        f = self.casadi_function()
+        if self.refine is None:
+            return f
+        sub = self.casadi_substep()
+        x = ca.MX.sym("x", self.state.size)
+        p = ca.MX.sym("p", self.params.size)
+        w = ca.MX.sym("w", self.n_inputs)
+        y = f(x, p, w)
+        xs = x
+        for j in range(self.refine.n_sub):
+            xs = sub(xs, p, ca.vertcat(w, float(j)))
+        flag = y[self.state.slices[self.refine.flag].start]
+        return ca.Function(f"{self.name}_refined", [x, p, w], [ca.if_else(flag != 0, xs, y, True)])
 
 
 class Rollout:
@@ -498,7 +616,7 @@ class Rollout:
         nx = self.model.state.size
         key = (Mo, nob)
         if key not in self._vm:
-            f = self.model.casadi_function()
+            f = self.model.refined_function()
             inner = f.mapaccum("steps", Mo)
             x0s = ca.MX.sym("x0", nx)
             ps = ca.MX.sym("p", self.model.params.size)
@@ -556,8 +674,17 @@ def c_source(model: StepModel, lanes: bool = False) -> bytes:
     defs = (f"#define NX {model.state.size}\n#define NP {model.params.size}\n#define NW {model.n_inputs}\n"
             f"#define NRESET {len(idx)}\n#define LANES {int(lanes)}\n#define LANE_WIDTH {LANE_WIDTH}\n"
             f"static const int RESET_IDX[{max(1, len(idx))}] = {{{', '.join(map(str, idx)) or '0'}}};\n")
+    driver = _DRIVER
+    if model.refine is not None:
+        r = model.refine
+        defs += (f"#define NSUB {int(r.n_sub)}\n#define FLAG_IDX {model.state.slices[r.flag].start}\n"
+                 + _function_c(model, model.casadi_substep(), "PREFIX_sub") + _REFINE_FN)
+        for anchor, text in ((_REFINE_ANCHOR, _REFINE_CALL + _REFINE_ANCHOR),):
+            if anchor not in driver:  # pragma: no cover - the driver text and the anchor are written together
+                raise RuntimeError("the roll-out driver has no place for the refinement call")
+            driver = driver.replace(anchor, text)
     src = (f"/* {model.name}: generated by fmvmg_sim.compiled from the model's CasADi expression graph */\n"
-           + _HEADER + defs + _step_c(model) + _DRIVER).replace("PREFIX", model.name)
+           + _HEADER + defs + _step_c(model) + driver).replace("PREFIX", model.name)
     _SOURCES[model.name, lanes] = src.encode()
     return _SOURCES[model.name, lanes]
 

@@ -36,6 +36,10 @@ from .device import Device, OperatingPoint
 CORE_INPUTS = ("F_x_ext", "F_y_ext", "n_drive", "n_sense")
 #: Outputs of the linear core, in order.
 CORE_OUTPUTS = ("v_x", "v_ps", "v_s", "x", "y", "v_ac")
+#: Floor of the carrier normaliser's amplitude detector, as a fraction of the phase-shifted pickoff's
+#: amplitude at the set-point: below it the 'normalized' carrier shrinks with the pickoff instead of
+#: amplifying noise (both engines apply it).
+NORMALISER_FLOOR_REL = 0.1
 
 
 @dataclass
@@ -171,6 +175,18 @@ class Diagram:
         off[1] = self.drive_amp.offset_V * self.phase_shifter.frequency_response(0.0)[0, 0].real
         off[2] = self.sense_amp1.offset_V * self.sense_amp2.gain + self.sense_amp2.offset_V
         return off
+
+    def normaliser_floor_V(self) -> float:
+        """Floor of the carrier normaliser ``n = Vdac / max(sqrt(v_x^2 + v_ps^2), floor)`` (V).
+
+        :data:`NORMALISER_FLOOR_REL` of the phase-shifted pickoff's amplitude at the set-point
+        (the amplitude the rectifier and low-pass read as Vref).
+
+        Returns
+        -------
+        float
+        """
+        return NORMALISER_FLOOR_REL * (self.vref_V - self.rectifier.offset_V) / self.rectifier.describing_gain()
 
     # --- envelope faces of the chains -------------------------------------------------
     def drive_chain_response(self, omega_rad_s: float) -> complex:

@@ -127,3 +127,117 @@ def test_generated_c_matches_casadi_operation_by_operation(tmp_path, monkeypatch
             got = roll(x0, np.array([[0.5]]), np.array([[2.0]]), 1)[0]
             want = np.asarray(f(x0, [0.5], [2.0])).ravel()
             assert np.array_equal(got, want, equal_nan=True), (a, b, got, want)
+
+
+# --- refinement of flagged steps: a clamped first-order loop ----------------------------------------------
+# x' = -a x + b u, u = clamp(k (r - x), 0, u_max): linear in each piece (free, clamped), discretised exactly per
+# piece; a step that ends in another piece than it started in is flagged and redone in sub-steps.
+
+from blocks.ops import numpy_ops  # noqa: E402
+from fmvmg_sim.carrier.layout import Layout  # noqa: E402
+from fmvmg_sim.compiled import Refinement, StepModel  # noqa: E402
+
+_TOY_SUB = 16
+_TOY_X = Layout([("x", ()), ("u", ()), ("refine", ())])
+_TOY_P = Layout([(n, ()) for n in ("b", "k", "u_max", "ef", "gf", "eh", "gh", "efs", "gfs", "ehs", "ghs")])
+
+
+def _toy_params(a=5.0, b=2.0, k=40.0, u_max=3.0, h=0.05):
+    lam = a + b * k
+
+    def disc(rate, hh):  # x+ = e x + g * (forcing / rate) ... as (decay, gain per unit of rate-normalised input)
+        e = np.exp(-rate * hh)
+        return e, (1.0 - e) / rate
+
+    ef, gf = disc(lam, h)
+    eh, gh = disc(a, h)
+    efs, gfs = disc(lam, h / _TOY_SUB)
+    ehs, ghs = disc(a, h / _TOY_SUB)
+    return _TOY_P.pack(dict(b=b, k=k, u_max=u_max, ef=ef, gf=gf, eh=eh, gh=gh, efs=efs, gfs=gfs, ehs=ehs, ghs=ghs))
+
+
+def _toy_advance(xs, p, r, sub, ops):
+    P = _TOY_P.unpack
+    x = xs[0]
+    b, k, umax = P(p, "b"), P(p, "k"), P(p, "u_max")
+    e_f, g_f, e_h, g_h = ((P(p, "efs"), P(p, "gfs"), P(p, "ehs"), P(p, "ghs")) if sub
+                          else (P(p, "ef"), P(p, "gf"), P(p, "eh"), P(p, "gh")))
+    u_free = k * (r - x)
+    high = u_free > umax
+    U = ops.if_else(high, umax, 0.0)
+    clamped = 1.0 * high + 1.0 * (u_free < 0)
+    free = e_f * x + g_f * b * k * r
+    held = e_h * x + g_h * b * U
+    x1 = ops.if_else(clamped > 0, held, free)
+    u1f = k * (r - x1)
+    clamped1 = 1.0 * (u1f > umax) + 1.0 * (u1f < 0)
+    return x1, ops.fmin(ops.fmax(u1f, 0.0), umax), clamped, clamped1
+
+
+def _toy_step(xs, p, w, ops):
+    x1, u1, c0, c1 = _toy_advance(xs, p, w[0], False, ops)
+    return [x1, u1, ops.if_else(ops.fabs(c1 - c0) > 0, 1.0, 0.0)]
+
+
+def _toy_substep(xs, p, wj, ops):
+    x1, u1, _, _ = _toy_advance(xs, p, wj[0], True, ops)
+    return [x1, u1, 0.0]
+
+
+TOY = StepModel("fmvmg_test_refine", _TOY_X, _TOY_P, 1, _toy_step,
+                refine=Refinement(_toy_substep, _TOY_SUB, "refine"))
+
+
+def _toy_exact(x0, r, p_kw, t_end):
+    """The clamped loop from x0 under a constant reference, by tiny steps (the reference solution)."""
+    a, b, k, umax = p_kw["a"], p_kw["b"], p_kw["k"], p_kw["u_max"]
+    n = 200_000
+    dt = t_end / n
+    x = x0
+    for _ in range(n):
+        u = min(max(k * (r - x), 0.0), umax)
+        x += dt * (-a * x + b * u)
+    return x
+
+
+def test_refined_steps_are_the_same_compiled_in_lanes_in_the_vm_and_in_numpy(monkeypatch):
+    """A clamped loop whose set-point steps: the flagged steps are redone in sub-steps by every roll-out alike,
+    and the refined result is the exact solution's to the sub-step's accuracy (the unrefined step is far off)."""
+    single = load_rollout(TOY, log=lambda m: None)
+    if not single.compiled:
+        pytest.skip("no C compiler on this machine")
+    lanes = load_rollout(TOY, log=lambda m: None, lanes=True)
+    kw = dict(a=5.0, b=2.0, k=40.0, u_max=3.0, h=0.05)
+    P = np.stack([_toy_params(**kw), _toy_params(**{**kw, "u_max": 2.0}), _toy_params(**{**kw, "k": 80.0})])
+    K, M = 2, 10
+    r = np.concatenate([np.full(5, 1.0), np.full(15, 0.1)])  # a step up (into the clamp), then down (below 0)
+    W = np.repeat(r[None, :, None], 3, axis=0)
+    x0 = np.zeros((3, 3))
+    together = lanes.units(x0, P[:, None, :].repeat(K, axis=1), W, M)
+    import fmvmg_sim.compiled as comp
+    monkeypatch.setenv("FMVMG_NO_COMPILE", "1")
+    monkeypatch.setattr(comp, "_WARNED", True)
+    vm = load_rollout(TOY, log=lambda m: None)
+    assert not vm.compiled
+    for u in range(3):
+        alone = single(x0[u], P[u][None].repeat(K, axis=0), W[u], M)
+        assert np.array_equal(alone, together[u])
+        np.testing.assert_allclose(vm(x0[u], P[u][None].repeat(K, axis=0), W[u], M), alone, rtol=1e-12, atol=1e-15)
+        xs, flagged = x0[u].copy(), 0
+        for s in range(K * M):
+            flagged += _toy_step(list(xs), list(P[u]), [r[s]], numpy_ops)[2]
+            xs = TOY.advance(xs, P[u], [r[s]])
+            if s % M == M - 1:
+                np.testing.assert_allclose(xs, alone[s // M], rtol=1e-12, atol=1e-15)
+        assert 1 <= flagged <= 4  # the crossings only
+    # against the exact solution: the first steps, into the clamp and out of it, refined or not
+    n = 6  # the clamp is left at 0.29 s, within the sixth step
+    x_ref = _toy_exact(0.0, 1.0, kw, n * kw["h"])
+    xs = np.zeros(3)
+    for s in range(n):
+        xs = TOY.advance(xs, P[0], [1.0])
+    x_plain = 0.0
+    for s in range(n):
+        x_plain = _toy_step([x_plain, 0.0, 0.0], list(P[0]), [1.0], numpy_ops)[0]
+    assert abs(xs[0] - x_ref) < 0.2 * abs(x_plain - x_ref)   # measured 0.14: the sub-step's first-order error
+    assert abs(xs[0] - x_ref) < 5e-4 * x_ref

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from fmvmg_sim.analysis import allan_deviation
 from fmvmg_sim.averaged import steady_state
 from fmvmg_sim.carrier.discretize import foh, noise_covariance
 from fmvmg_sim.carrier.engine import run_carrier
@@ -79,6 +80,7 @@ def test_white_noise_level_matches_the_analytic_arw(make_scenario):
     y = x[: len(x) // m * m].reshape(-1, m).mean(axis=1)
     adev_1s = np.sqrt(0.5 * np.mean(np.diff(y) ** 2))
     assert adev_1s == pytest.approx(n_expected, rel=0.06)
+    assert allan_deviation(x, 100.0).N == pytest.approx(n_expected, rel=0.02)  # the fitted white term
 
 
 def test_foh_is_exact_for_ramps():
@@ -132,8 +134,8 @@ def test_temperature_interpolation_of_the_discretised_model_is_accurate(offsets)
         Pd = PARAMS.pack(operating_params(build_diagram(dev, T, board_C=T + off), 0.01, on))
         for name, sl in PARAMS.slices.items():
             if name == "L":  # compare the covariances the factors stand for
-                n = PARAMS.shapes["L"][0]
-                Li, Ld = Pi[sl].reshape(n, n), Pd[sl].reshape(n, n)
+                shape = PARAMS.shapes["L"]
+                Li, Ld = Pi[sl].reshape(shape), Pd[sl].reshape(shape)
                 Qi, Qd = Li @ Li.T, Ld @ Ld.T
                 d = np.sqrt(np.clip(np.diag(Qd), 1e-300, None))
                 assert np.max(np.abs(Qi - Qd) / np.outer(d, d)) <= 1e-4, (T, name)  # in correlation units

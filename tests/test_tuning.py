@@ -139,8 +139,8 @@ def test_linear_model_against_engine_small_step(device, fidelity):
     c = check_step(device, 25.0, 68.0, 330.0, step_factor=1.01, hold_s=0.005, duration_s=0.06, fidelity=fidelity)
     assert c.engine == fidelity
     assert c.rms_difference <= 0.03
-    # measured: 0.002 % of the step on the envelope engine, 0.1 % on the carrier engine
-    assert c.rms_difference <= {"envelope": 0.001, "carrier": 0.005}[fidelity]
+    # measured: 0.002 % of the step on the envelope engine, 0.015 % on the carrier engine
+    assert c.rms_difference <= {"envelope": 0.0002, "carrier": 0.001}[fidelity]
     assert abs(c.settling_error_rel) <= 0.05
 
 

@@ -21,10 +21,18 @@ The local log-log slope at each tau is the least-squares slope of ln(sigma) on l
 points within one octave either side. Only points averaging at least ``min_clusters``
 independent clusters (N // m) are used for fits and the minimum.
 
-* ARW: sigma = N / sqrt(tau) is fitted (EDF-weighted, slope fixed) ONLY on the shortest-tau run of
-  points whose local slope is -1/2 +- 0.1, spanning at least one octave and lying at or left of
-  the Allan minimum; N is that line read at tau = 1 s. No run, no N (None, with a reason):
-  N is never read outside a valid region.
+* ARW: read only where a white-noise region exists: the shortest-tau run of points whose local
+  slope is -1/2 +- 0.1, spanning at least one octave and lying at or left of the Allan minimum.
+  No run, no N (None, with a reason): N is never read outside a valid region. N is then the
+  white term of the power-law sum ``sigma^2 = C/tau^2 + N^2/tau + B^2 + K^2 tau/3`` (IEEE 952
+  Annex C) fitted, EDF-weighted, from the start of the run to the Allan minimum: the flicker
+  floor's bend towards the minimum is the ``B^2`` term's, not the white line's; the leading
+  deficit of a low-pass (an anti-alias or output filter, which lowers sigma by about
+  ``tau_f / tau`` relative: 9 % at tau = 10 ms behind a 100 Hz two-pole filter) and any
+  quantisation are the ``C/tau^2`` term's. The taus the filter shapes beyond that leading term
+  (within a few of its time constants) are left out: the fit starts at the shortest tau of the
+  run from which the sum fits every fitted point within :data:`FIT_SIGMAS` of its confidence
+  interval. So N is the white level itself, the same from records of one noise at 10 Hz or 1 kHz.
 * Bias instability: the Allan minimum, min over usable taus of sigma ("Allan minimum"
   definition, the one paper 000's 34.66 deg/h uses); the IEEE 952 flicker coefficient
   B = minimum / 0.664 is reported separately.
@@ -49,6 +57,7 @@ from pathlib import Path
 
 import allantools
 import numpy as np
+from scipy.optimize import lsq_linear
 
 from ..errors import InputError
 
@@ -68,6 +77,15 @@ RRW_TO_DEG_PER_H_SQRT_S = 3600.0
 SLOPE_TOL = 0.1
 #: Averages needed before the lag-1 autocorrelation noise identification is trusted.
 NOISE_ID_MIN_AVERAGES = 100
+#: A start tau of the ARW fit is accepted when the power-law sum fits every fitted point within this many
+#: one-sigma confidence half-widths (in ln sigma); shorter, filter-shaped taus do not.
+FIT_SIGMAS = 2.0
+#: The fit is judged over its first taus, up to this multiple of its start (a filter's shaping shows there;
+#: the statistical wiggles of the flicker floor towards the Allan minimum must not move the start).
+SHAPED_SPAN = 4.0
+#: Label of the ARW reading used for ``arw_deg_per_sqrt_h``.
+ARW_DEFINITION = ("white term N of the power-law sum C/tau^2 + N^2/tau + B^2 + K^2 tau/3 fitted from the first "
+                  "unshaped tau of the -1/2 region to the Allan minimum (IEEE 952 Annex C), read as N at tau = 1 s")
 #: Label of the bias-instability definition used for ``bias_instability_deg_per_h``.
 BI_DEFINITION = "allan_minimum: min over tau of the OADEV (no 0.664 factor); IEEE 952 B = min/0.664 is bias_instability_ieee952_deg_per_h"
 
@@ -321,6 +339,9 @@ class AllanResult:
         Minimum of ``adev`` over the usable taus, in ``unit``.
     tau_min_s : float or None
         Tau of that minimum.
+    power_law : dict or None
+        The power-law sum the ARW is read from: its coefficients ``C`` (unit^2 s^2), ``N2``
+        (unit^2 s), ``B2`` (unit^2), ``K2`` (unit^2 / s) and the tau range fitted.
     """
 
     taus_s: np.ndarray
@@ -344,6 +365,7 @@ class AllanResult:
     quantization: FitTerm = field(default_factory=lambda: FitTerm(-1.0))
     allan_minimum: float | None = None
     tau_min_s: float | None = None
+    power_law: dict | None = None
     _i_min: int = field(default=-1, init=False, repr=False)
 
     # --- generic terms, in the channel's unit -------------------------------------------
@@ -448,6 +470,8 @@ class AllanResult:
             "edf": arr(self.edf),
             "slopes": arr(self.slopes),
             "arw_deg_per_sqrt_h": num(self.arw_deg_per_sqrt_h),
+            "arw_definition": ARW_DEFINITION,
+            "arw_power_law": None if self.power_law is None else {k: num(v) for k, v in self.power_law.items()},
             "arw_region_s": region(self.white),
             "arw_reason": self.white.reason or (not_deg if self.N is not None else None),
             "bias_instability_deg_per_h": num(self.bias_instability_deg_per_h),
@@ -581,8 +605,75 @@ def _read_terms(res: AllanResult) -> None:
     elif i_min == idx[0]:
         res.notes.append("the curve rises from the shortest tau: the Allan minimum is at the first tau")
     res.white = _find_term(res, fit_ok, -0.5, "left", True, 1.0, "-1/2 (white noise)")
+    if res.white.value is not None:
+        _fit_white(res, fit_ok)
     res.random_walk = _find_term(res, fit_ok, 0.5, "right", False, 3.0, "+1/2 (random walk)")
     res.quantization = _find_term(res, fit_ok, -1.0, "left", True, math.sqrt(3.0), "-1 (quantisation)")
     for name, t in (("ARW", res.white), ("RRW", res.random_walk)):
         if t.reason:
             res.notes.append(f"{name} not reported: {t.reason}")
+
+
+def _power_law_fit(taus, adev, edf, idx, terms):
+    """EDF-weighted least squares of ``sigma^2`` by the ``terms`` among N^2/tau, B^2, C/tau^2, K^2 tau/3.
+
+    Relative residuals of the variance, each weighted by its EDF (var(sigma^2)/sigma^4 = 2/EDF);
+    N^2, B^2, K^2 are kept non-negative, C (a filter's deficit or quantisation) takes either sign.
+    Returns the coefficients (C, N2, B2, K2) and ln(model sigma / sigma) at ``idx``.
+    """
+    t, s2, w = taus[idx], adev[idx] ** 2, np.sqrt(edf[idx])
+    basis = {"N2": 1.0 / t, "B2": np.ones_like(t), "C": 1.0 / t ** 2, "K2": t / 3.0}
+    F = np.column_stack([basis[k] for k in terms])
+    lo = [-np.inf if k == "C" else 0.0 for k in terms]
+    sol = lsq_linear(F / s2[:, None] * w[:, None], w, bounds=(lo, [np.inf] * len(terms)))
+    coef = dict.fromkeys(("C", "N2", "B2", "K2"), 0.0)
+    coef.update(zip(terms, (float(v) for v in sol.x)))
+    model = F @ sol.x
+    with np.errstate(divide="ignore", invalid="ignore"):
+        resid = 0.5 * np.log(np.where(model > 0, model, np.nan) / s2)
+    return coef, resid
+
+
+#: The power-law sums tried in turn at each start tau: the simplest that fits is kept.
+_POWER_LAW_MODELS = (("N2", "B2"), ("N2", "B2", "C"), ("N2", "B2", "C", "K2"))
+
+
+def _fit_white(res: AllanResult, usable: np.ndarray) -> None:
+    """Replace the -1/2 line of ``res.white`` by the white term of the power-law sum (module docstring).
+
+    From the start of the -1/2 run on, each start tau is tried with white + flicker, then with the
+    1/tau^2 term, then with rate random walk added; the first (start, sum) that fits every point up
+    to the Allan minimum within :data:`FIT_SIGMAS` confidence half-widths gives N.
+    """
+    a = int(np.searchsorted(res.taus_s, res.white.region_s[0]))
+    i_min = res._i_min
+    ci = 0.5 * np.log(res.adev_hi / np.where(res.adev_lo > 0, res.adev_lo, res.adev_hi))
+    best = None
+    for i0 in range(a, i_min + 1):
+        idx = np.arange(i0, i_min + 1)
+        idx = idx[usable[idx]]
+        if len(idx) < 3 or res.taus_s[idx[-1]] / res.taus_s[idx[0]] < 2.0 * (1 - 1e-9):
+            break
+        for terms in _POWER_LAW_MODELS:
+            if len(idx) < len(terms) + 2:
+                break
+            coef, resid = _power_law_fit(res.taus_s, res.adev, res.edf, idx, terms)
+            if coef["N2"] <= 0:
+                continue
+            near = res.taus_s[idx] <= SHAPED_SPAN * res.taus_s[idx[0]]  # where a filter would show
+            misfit = float(np.nanmax(np.abs(resid[near]) / np.maximum(ci[idx][near], 1e-12)))
+            if best is None or misfit < best[0]:
+                best = (misfit, idx, coef)
+            if misfit <= FIT_SIGMAS:
+                break
+        if best is not None and best[0] <= FIT_SIGMAS:
+            break
+    if best is None:
+        res.notes.append("ARW: the power-law sum could not be fitted; N is the -1/2 line's")
+        return
+    misfit, idx, coef = best
+    if misfit > FIT_SIGMAS:
+        res.notes.append(f"ARW: no start tau lets the power-law sum fit within {FIT_SIGMAS:g} sigma "
+                         f"(best {misfit:.1f} sigma, from {res.taus_s[idx[0]]:.4g} s)")
+    res.white = FitTerm(-0.5, float(math.sqrt(coef["N2"])), (float(res.taus_s[idx[0]]), float(res.taus_s[idx[-1]])))
+    res.power_law = dict(coef, tau_first_s=float(res.taus_s[idx[0]]), tau_last_s=float(res.taus_s[idx[-1]]))

@@ -22,7 +22,8 @@ def plot_allan(result, path: str | os.PathLike, title: str | None = None) -> Non
     Parameters
     ----------
     result : AllanResult
-        The analysis to draw: curve, CI band, fitted -1 / -1/2 lines (read at sqrt(3) s and 1 s),
+        The analysis to draw: curve, CI band, the power-law sum the ARW is read from (over its fit
+        range), fitted -1 / -1/2 lines (read at sqrt(3) s and 1 s),
         the Allan minimum (0 line) and the +1/2 line (read at 3 s), each over its fit region
         (solid) and extended (dotted).
     path : path-like
@@ -59,6 +60,12 @@ def plot_allan(result, path: str | os.PathLike, title: str | None = None) -> Non
         ax.loglog(tt, line, ":", color=color, lw=1)
         r = np.array(term.region_s)
         ax.loglog(r, term.value * (r / tau_read) ** term.slope, "-", color=color, lw=2.5, label=label)
+    pl = result.power_law
+    if pl is not None:  # the power-law sum the ARW is read from, over its fit range
+        tf = np.geomspace(pl["tau_first_s"], pl["tau_last_s"], 60)
+        s2 = pl["C"] / tf ** 2 + pl["N2"] / tf + pl["B2"] + pl["K2"] * tf / 3.0
+        ax.loglog(tf, np.sqrt(np.clip(s2, 0.0, None)), "--", color="black", lw=1,
+                  label="power-law fit (ARW's white term)")
     if result.allan_minimum is not None:
         ax.axhline(result.allan_minimum, color="tab:orange", ls="--", lw=1, label=_bi_label(result))
         ax.plot([result.tau_min_s], [result.allan_minimum], "s", color="tab:orange", ms=6)

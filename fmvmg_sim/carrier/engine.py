@@ -108,7 +108,7 @@ class _Unit:
         board = fx.board_temperature(t_mid, case_mid)
         self.sig = fx.signals(t_mid, temp)
         self.rate_dps = np.asarray(scn.rate(t_mid), dtype=float) + self.sig["rate_dps"]
-        self.rate_end = np.asarray(scn.rate(self.t_end), dtype=float)
+        self.rate_end = np.asarray(scn.rate.left_limit(self.t_end), dtype=float)  # over the sample (a step at its end: after)
         self.vref_f = np.asarray(scn.vref_factor(t_mid), dtype=float)
         self.rng = rng = np.random.default_rng(scn.seed)
         nz = self.nz = scn.noise
@@ -187,13 +187,14 @@ class _Unit:
         x_m, v = z[:, 0] * self.scale[0], z[:, 1] * self.scale[1]
         amp_m = np.hypot(x_m, v / omega)
         t_end = self.t_end
+        case_end = np.asarray(scn.temperature.left_limit(t_end), dtype=float)  # the sample's, as rate_true_dps
         channels = dict(
-            time_s=t_end, temperature_C=np.asarray(scn.temperature(t_end), dtype=float),
+            time_s=t_end, temperature_C=case_end,
             rate_dps=rate_V / self.sf_nom, rate_V=rate_V, rate_true_dps=self.rate_end, quadrature_V=quad_V,
             drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
             drive_frequency_Hz=freq,
         )
-        t_end_die = self.fx.die_temperature(t_end, np.asarray(scn.temperature(t_end), dtype=float))
+        t_end_die = self.fx.die_temperature(t_end, case_end)
         internal = dict(drive_displacement_amplitude_m=amp_m, modulator_norm=_state(X, "n")[:, 0],
                         die_temperature_C=t_end_die)
         wall = time.perf_counter() - self.wall0

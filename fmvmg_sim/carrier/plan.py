@@ -9,13 +9,13 @@ import numpy as np
 from blocks import FullWaveRectifier
 
 from ..averaged import SteadyState, steady_state
-from ..diagram import CORE_INPUTS, CORE_OUTPUTS, Diagram
+from ..diagram import CORE_INPUTS, CORE_OUTPUTS, NORMALISER_FLOOR_REL, Diagram
 from .discretize import expm_derivative, zoh
 from .layout import Layout
 from .step import N_CORE, PARAMS, STATE
 
-#: Floor of the carrier normaliser, as a fraction of the steady v_ps amplitude.
-NORMALISER_FLOOR = 0.1
+#: Floor of the carrier normaliser, as a fraction of the v_ps amplitude at the set-point (the diagram's).
+NORMALISER_FLOOR = NORMALISER_FLOOR_REL
 
 
 @dataclass
@@ -141,7 +141,7 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
         rect_offset=dg.rectifier.offset_V, Phi_amp=Phi_amp, Gam_amp=Gam_amp[:, 0],
         vref=dg.vref_V, kp=dg.pi.kp, ki=dg.pi.ki_per_s, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
         k_mod=dg.modulator.k_per_V, vdac=dg.vdac_V, normalized=1.0 if dg.carrier_mode == "normalized" else 0.0,
-        n_floor_V=NORMALISER_FLOOR * ss.v_ps_amplitude_V, quad_coef=dg.comb_drive.quadratic_coef_N_per_V2,
+        n_floor_V=dg.normaliser_floor_V(), quad_coef=dg.comb_drive.quadratic_coef_N_per_V2,
         vdc2=dg.comb_drive.vdc_V ** 2, cos_ref=1.0, sin_ref=0.0, k_demod=dg.demodulator.k_per_V,
         Phi_out=Phi_out, Gam_out=Gam_out[:, 0], h=h_s,
     )

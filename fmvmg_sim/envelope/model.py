@@ -6,26 +6,40 @@ with the drive displacement as phase reference (``X = A`` real):
 
 * drive amplitude::
 
-      A' = Re[(u f_c + f_2 A - Z_d A + kappa Y) / D_d],  theta' = Im[...] / A
+      A' = Re[(rho u f_c + f_2 A - Z_d A + kappa Y) / D_d],  theta' = Im[...] / A
       Z_d = k_d - m_d w^2 + i w c_d,  D_d = 2 i w m_d + c_d,  f_c = K_comb K_mod C,
       kappa = -(k_q + i w c_q) + 2 i w m_c W   (the sense mode's back-action),
       f_2 A = K_comb K_mod U_2 conj(C) / 2     (rectifier ripple leaking through LPF (4) and the PI)
 
+  (first order in the envelope: its amplitude response is within 1e-4 of the second-order
+  mode's, see the tests); ``rho = min(1, A / A_floor)`` is the carrier normaliser's floor:
+  below it the carrier shrinks with the pickoff (:meth:`fmvmg_sim.diagram.Diagram.normaliser_floor_V`);
 * rectifier + LPF (4): the LPF driven by the describing function ``(2/pi) G_r |H_dx H_ps| A``;
-* comparator and PI: ``u = Kp (Vref - r) + Ki I``, clamped with the integrator held;
-* sense envelope: ``Y' = (F_y - Z_s Y) / D_s``, ``F_y = (-(2 m_c W + c_q) i w - k_q) A + F_noise``;
+* comparator and PI: ``u = Kp (Vref - r) + Ki I``, clamped, the integrator held while the error
+  pushes further into the clamp (:meth:`blocks.PIController.clamp_state`);
+* sense mode: the resonator's exact envelope face (:meth:`blocks.TwoModeResonator.envelope_mode`),
+  ``Y = Y_s + d F_y``, ``Y_s' = s_1 Y_s + r F_y``, ``F_y = -(2 m_c W + c_q) i w A - k_q A + F_noise``;
 * sense chain ``V_s = H_se (K_sy Y + (C_ft/C_f) V_ac) + noise`` and the output LPF applied to
   Re V_s and Im V_s; demodulation (13) with the reference phasors R_I, R_Q (rotated by the
   demodulation-phase flicker) commutes with the LPF because the references vary slowly:
   ``rate_V = G_out K_m Re(LPF(V_s) conj(R_I)) / 2``.
 
-All of this is one linear system while the PI is not saturated; it is discretised exactly
-(closed loop), and again with ``u`` as a held input for saturation. The rate enters through
+All of this is one linear system in each of two pieces: the PI free (closed loop) and the PI
+clamped (``u`` a held input). Each is discretised exactly for the step and for a sub-step
+``h / N_SUB``; a step that crosses from one piece into another, or runs below the normaliser's
+floor, is redone in sub-steps (:class:`fmvmg_sim.compiled.Refinement`). The rate enters through
 first-order-hold inputs ``W A`` and ``W Y`` (A and Y held over the step). White noises enter
 through their exact one-step covariance, so the step can be as long as an output interval.
-Integrals ``J`` of the amplitude estimate and of the output LPF give integrate-and-dump outputs.
+Integrals ``J`` of the amplitude estimate and of the output LPF give integrate-and-dump outputs, and
+with the integral ``K`` of the PI's integrator, the PI output's exact mean over a step.
 
-State: ``[A, s1, s2, I, J, Yr, Yi, Sr1, Sr2, Si1, Si2, Jr, Ji]``.
+State: ``[A, s1, s2, I, J, Yr, Yi, Sr1, Sr2, Si1, Si2, Jr, Ji, K]`` (``Y`` the sense mode's slow part).
+
+A further clamped block (a force-to-rebalance PI, a PLL's loop filter) is one more dimension of
+pieces: a piece per combination of free and clamped blocks, each the system with the clamped
+blocks' outputs as held inputs, discretised at both levels (:data:`PIECES`, :func:`piece_field`);
+the step picks the piece from each block's ``clamp_state`` at its start and flags a change at
+its end, and the refinement needs nothing more.
 """
 
 from __future__ import annotations
@@ -33,29 +47,64 @@ from __future__ import annotations
 import numpy as np
 
 from ..averaged import carrier_phasors, ripple_feedback, steady_state
-from ..carrier.discretize import batched_factor, foh, noise_covariance, zoh
+from ..carrier.discretize import batched_factor, foh, noise_covariance
 from ..carrier.layout import Layout
 from ..diagram import Diagram
 from ..errors import InputError
 
-N = 13
-IA, IS1, IS2, II, IJ, IYR, IYI, ISR, ISR2, ISI, ISI2, IJR, IJI = range(N)
+N = 14
+IA, IS1, IS2, II, IJ, IYR, IYI, ISR, ISR2, ISI, ISI2, IJR, IJI, IK = range(N)
 N_U = 7  # FOH inputs: [vref, W A, W Yr, W Yi, dkq A, dkq Yr, dkq Yi] (dkq: extra quadrature stiffness, N/m)
-N_NOISE = N
+#: Standard normals per step: one per state but the integral K, whose own share of the step's noise (the
+#: integral of the integrator's noise within a step) is left out: K only makes the PI output's mean exact.
+N_NOISE = N - 1
+#: Sub-steps of a refined step (a crossing into or out of the PI's clamp, the normaliser's floor).
+N_SUB = 32
 
-PARAMS = Layout([
-    ("Phi", (N, N)), ("G0", (N, N_U)), ("G1", (N, N_U)), ("Gc", (N,)),
-    ("Phi_s", (N, N)), ("G0_s", (N, N_U)), ("G1_s", (N, N_U)), ("Gu_s", (N,)), ("Gc_s", (N,)),
-    ("L", (N, N)),
-    ("vref0", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
-    ("R_I", (2,)), ("R_Q", (2,)), ("g_out", ()), ("h", ()),
-    ("omega", ()), ("b_u", ()), ("b_A", ()), ("b_Y", (2,)), ("k_quad", ()),
-])
+#: The two pieces of the model, each discretised for the step and the sub-step: field names per piece.
+_PIECE_FIELDS = (("Phi", (N, N)), ("G0", (N, N_U)), ("G1", (N, N_U)), ("Gc", (N,)), ("Gu", (N,)))
+PIECES = ("free", "held")
+LEVELS = ("step", "sub")
+
+
+def piece_field(name: str, piece: str, level: str) -> str:
+    """Parameter name of one discretisation field (``Phi``, ``G0``, ``G1``, ``Gc``, ``Gu``).
+
+    Parameters
+    ----------
+    name : str
+    piece : {"free", "held"}
+    level : {"step", "sub"}
+
+    Returns
+    -------
+    str
+    """
+    return f"{name}_{piece}_{level}"
+
+
+PARAMS = Layout(
+    [(piece_field(name, piece, level), shape) for level in LEVELS for piece in PIECES for name, shape in _PIECE_FIELDS]
+    + [
+        ("L", (N, N_NOISE)),
+        ("vref0", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
+        ("R_I", (2,)), ("R_Q", (2,)), ("g_out", ()), ("h", ()),
+        ("omega", ()), ("b_u", ()), ("b_A", ()), ("b_Y", (2,)), ("k_quad", ()),
+        ("y_A", (2,)), ("a_floor", ()),
+    ])
 
 
 def _cmat(z: complex) -> np.ndarray:
     """Real 2x2 matrix of multiplication by the complex number z."""
     return np.array([[z.real, -z.imag], [z.imag, z.real]])
+
+
+def _discretise(M: np.ndarray, Bu: np.ndarray, Bc: np.ndarray, bu: np.ndarray, h_s: float) -> dict:
+    """Exact discretisation of ``x' = M x + Bu in(t) + Bc + bu u`` for step ``h_s``: ``in`` linear over
+    the step (first-order hold), the constant and ``u`` held (one matrix exponential)."""
+    Phi, G0, G1 = foh(M, np.column_stack([Bu, Bc, bu]), h_s)
+    held = G0[:, N_U:] + G1[:, N_U:]  # a held input: both hold gains together
+    return dict(Phi=Phi, G0=G0[:, :N_U], G1=G1[:, :N_U], Gc=held[:, 0], Gu=held[:, 1])
 
 
 def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
@@ -72,8 +121,9 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
     Returns
     -------
     dict
-        Fields of :data:`PARAMS`, plus ``steady`` (the :class:`~fmvmg_sim.averaged.SteadyState`)
-        and ``x_steady`` (the state at the zero-rate steady state).
+        Fields of :data:`PARAMS`, plus ``steady`` (the :class:`~fmvmg_sim.averaged.SteadyState`),
+        ``x_steady`` (the state at the zero-rate steady state) and ``Q`` (the one-step noise covariance of
+        the first :data:`N_NOISE` states).
     """
     if dg.carrier_mode != "normalized":
         raise InputError("the envelope engine models the 'normalized' carrier only; use --fidelity carrier",
@@ -91,18 +141,18 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
     U2_per_A = ripple_feedback(dg, w, Hx * Hps * A0) / A0
     f2 = kc * 0.5 * U2_per_A * np.conj(C0)
     fu = kc * C0 / Dd                   # per unit u
-    fA = (f2 - Zd) / Dd                 # per unit A
+    fA = (f2 - Zd) / Dd                 # per unit A, PI free (the ripple passes the PI)
+    fA_held = -Zd / Dd                  # PI clamped: no ripple reaches the modulator
     kap0 = -(r.k_quad_N_per_m + 1j * w * r.c_quad_N_s_per_m) / Dd
     kapW = (2j * w * r.m_coriolis_kg) / Dd
     k_r = dg.rectifier.describing_gain() * abs(Hx * Hps)
     lp = dg.amplitude_lpf.linear_model()
     Al, Bl = np.asarray(lp.A), np.asarray(lp.B)[:, 0]
     kp, ki = dg.pi.kp, dg.pi.ki_per_s
-    Ds = 2j * w * r.m_sense_kg + r.c_sense_N_s_per_m
-    Zs = r.k_sense_N_per_m - r.m_sense_kg * w ** 2 + 1j * w * r.c_sense_N_s_per_m
-    aY = -Zs / Ds
-    sA = (-r.c_quad_N_s_per_m * 1j * w - r.k_quad_N_per_m) / Ds
-    sW = (-2j * w * r.m_coriolis_kg) / Ds
+    # sense mode: Y = Y_s + d F_y, Y_s' = s1 Y_s + r F_y; F_y = fyA A + fyW (W A) - (dkq A) + F_noise
+    s1, rs, ds = r.envelope_mode("sense", w)
+    fyA = -r.c_quad_N_s_per_m * 1j * w - r.k_quad_N_per_m
+    fyW = -2j * w * r.m_coriolis_kg
     Hse = dg.sense_amps_response(w)
     sp = dg.sense_pickoff
     kY = Hse * sp.gain_V_per_m
@@ -110,92 +160,146 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
     kU, kU2 = ft * C0, ft * 0.5 * U2_per_A * np.conj(C0)  # V_s per unit u and per unit A (ripple part)
     ol = dg.output_lpf.linear_model()
     Ao, Bo = np.asarray(ol.A), np.asarray(ol.B)[:, 0] / dg.output_lpf.gain  # unit DC gain
+    # the physical Y per unit of A, of the inputs W A and dkq A, and of the sense force noise
+    yA, yW, yK = ds * fyA, ds * fyW, -ds
 
-    def system(closed: bool):
+    def system(free: bool):
         M = np.zeros((N, N))
         Bu = np.zeros((N, N_U))     # FOH inputs
         Bc = np.zeros(N)            # constant input (rectifier offset)
-        bu = np.zeros(N)            # held u (saturated)
-        # u = kp (vref - s1) + ki I when closed; a held input otherwise
+        bu = np.zeros(N)            # u as a held input
+        # u = kp (vref - s1) + ki I when free; a held input when clamped
         u_row = np.zeros(N)
         u_vref = 0.0
-        if closed:
+        if free:
             u_row[IS1], u_row[II], u_vref = -kp, ki, kp
-        # drive amplitude
-        M[IA, IA] = fA.real
+        # drive amplitude, with the sense mode's back-action kappa Y, Y = Y_s + yA A + yW (W A) + yK (dkq A)
+        M[IA, IA] = (fA if free else fA_held).real + (kap0 * yA).real
         M[IA] += fu.real * u_row
         Bu[IA, 0] = fu.real * u_vref
         bu[IA] = fu.real
         M[IA, IYR], M[IA, IYI] = _cmat(kap0)[0]
+        Bu[IA, 1] = (kap0 * yW).real
+        Bu[IA, 4] = (kap0 * yK).real
         Bu[IA, 2], Bu[IA, 3] = _cmat(kapW)[0]
         Bu[IA, 5], Bu[IA, 6] = _cmat(-1.0 / Dd)[0]
-        # amplitude estimate, integrator, its integral
+        # amplitude estimate, integrator (it integrates the error in both pieces: clamped, the step
+        # keeps or drops what it gathered, by the anti-windup rule), its integral
         M[IS1:IS2 + 1, IA] = Bl * k_r
         M[IS1:IS2 + 1, IS1:IS2 + 1] = Al
         Bc[IS1:IS2 + 1] = Bl * dg.rectifier.offset_V
-        if closed:
-            M[II, IS1] = -1.0
-            Bu[II, 0] = 1.0
+        M[II, IS1] = -1.0
+        Bu[II, 0] = 1.0
         M[IJ, IS1] = 1.0
-        # sense envelope
-        M[IYR:IYI + 1, IYR:IYI + 1] = _cmat(aY)
-        M[IYR:IYI + 1, IA] = [sA.real, sA.imag]
-        Bu[IYR:IYI + 1, 1] = [sW.real, sW.imag]
-        Bu[IYR:IYI + 1, 4] = [(-1.0 / Ds).real, (-1.0 / Ds).imag]
+        # sense mode, slow part
+        M[IYR:IYI + 1, IYR:IYI + 1] = _cmat(s1)
+        M[IYR:IYI + 1, IA] = [(rs * fyA).real, (rs * fyA).imag]
+        Bu[IYR:IYI + 1, 1] = [(rs * fyW).real, (rs * fyW).imag]
+        Bu[IYR:IYI + 1, 4] = [-rs.real, -rs.imag]
         # sense chain and output LPF on Re/Im of V_s = kY Y + kU u + kU2 A
         for comp, (i1, i2) in enumerate(((ISR, ISR2), (ISI, ISI2))):
             KY = _cmat(kY)[comp]
+            pick = (lambda z: z.real) if comp == 0 else (lambda z: z.imag)  # noqa: E731
             rows = slice(i1, i2 + 1)
             M[rows, i1:i2 + 1] = Ao
             M[rows, IYR] += Bo * KY[0]
             M[rows, IYI] += Bo * KY[1]
-            ku = (kU.real, kU.imag)[comp]
-            M[rows, IA] += Bo * (kU2.real, kU2.imag)[comp]
+            M[rows, IA] += Bo * (pick(kY * yA) + (pick(kU2) if free else 0.0))
+            Bu[rows, 1] += Bo * pick(kY * yW)
+            Bu[rows, 4] += Bo * pick(kY * yK)
+            ku = pick(kU)
             M[rows, :] += np.outer(Bo, ku * u_row)
             Bu[rows, 0] += Bo * ku * u_vref
             bu[rows] = Bo * ku
         M[IJR, ISR], M[IJI, ISI] = 1.0, 1.0
+        M[IK, II] = 1.0
         return M, Bu, Bc, bu
 
-    M, Bu, Bc, _ = system(True)
-    Phi, G0, G1 = foh(M, Bu, h_s)
-    _, Gc = zoh(M, Bc[:, None], h_s)
-    Ms, Bus, Bcs, bus = system(False)
-    Phi_s, G0_s, G1_s = foh(Ms, Bus, h_s)
-    _, Gcu = zoh(Ms, np.column_stack([Bcs, bus]), h_s)
+    out = {}
+    for piece in PIECES:
+        M, Bu, Bc, bu = system(piece == "free")
+        if piece == "free":
+            M_free, Bc_free = M, Bc
+        for level, hl in (("step", h_s), ("sub", h_s / N_SUB)):
+            for name, val in _discretise(M, Bu, Bc, bu, hl).items():
+                out[piece_field(name, piece, level)] = val
     # white noises: drive Brownian (in-phase part on A), electronic noise on the rectified signal,
-    # sense Brownian force envelope (Re, Im) and sense front-end voltage envelope (Re, Im)
+    # sense Brownian force (Re, Im; into the slow part and the feedthrough) and sense front-end voltage (Re, Im)
     psd_fd, psd_fs = r.brownian_force_psd_N2_per_Hz()
     e_d = dg.noise["drive_input_V_per_sqrtHz"] * abs(dg.drive_amp.frequency_response(w)[0, 0] * Hps)
     e_s = dg.noise["sense_input_V_per_sqrtHz"]
     br, el = noise_on["brownian"], noise_on["electronic"]
     Gn = np.zeros((N, 6))
     Gn[IA, 0] = 1.0
+    Gn[IA, 2:4] = _cmat(kap0 * ds)[0]
     Gn[IS1:IS2 + 1, 1] = Bl
-    Gn[IYR:IYI + 1, 2:4] = _cmat(1 / Ds)
+    Gn[IYR:IYI + 1, 2:4] = _cmat(rs)
     for comp, (i1, i2) in enumerate(((ISR, ISR2), (ISI, ISI2))):
+        Gn[i1:i2 + 1, 2:4] = np.outer(Bo, _cmat(kY * ds)[comp])
         Gn[i1:i2 + 1, 4:6] = np.outer(Bo, _cmat(Hse)[comp])
     q = np.array([psd_fd * abs(1 / Dd) ** 2 if br else 0.0, (dg.rectifier.gain * e_d) ** 2 / 2 if el else 0.0,
                   psd_fs if br else 0.0, psd_fs if br else 0.0, e_s ** 2 if el else 0.0, e_s ** 2 if el else 0.0])
-    Q = noise_covariance(M, Gn, np.diag(q), h_s)
-    L = batched_factor(Q[None])[0]
-    # frequency: theta' = Im[(u f_c + f_A A + kappa Y)/D_d] / A
-    x_ss = _steady_state_vector(ss, aY, sA, kY, kU, kU2, ki)
-    return dict(Phi=Phi, G0=G0, G1=G1, Gc=Gc[:, 0], Phi_s=Phi_s, G0_s=G0_s, G1_s=G1_s, Gu_s=Gcu[:, 1],
-                Gc_s=Gcu[:, 0], L=L, vref0=dg.vref_V, kp=kp, ki=ki, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
-                R_I=[ss.R_I.real, ss.R_I.imag], R_Q=[ss.R_Q.real, ss.R_Q.imag],
-                g_out=0.5 * dg.output_lpf.gain * dg.demodulator.k_per_V, h=h_s,
-                omega=w, b_u=fu.imag, b_A=fA.imag, b_Y=list(_cmat(kap0)[1]), k_quad=r.k_quad_N_per_m,
-                steady=ss, x_steady=x_ss, Q=Q)
+    Q = noise_covariance(M_free, Gn, np.diag(q), h_s)[:N_NOISE, :N_NOISE]
+    L = noise_factor(Q)
+    # the carrier normaliser's floor as a drive amplitude: below it the carrier is (Vdac / floor) v_ps
+    a_floor = dg.normaliser_floor_V() * abs(C0) / (dg.vdac_V * abs(Hx * Hps))
+    x_ss, _ = steady_vector(dg)
+    # frequency: theta' = Im[(u f_c + f_A A + kappa Y)/D_d]
+    out.update(L=L, vref0=dg.vref_V, kp=kp, ki=ki, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
+               R_I=[ss.R_I.real, ss.R_I.imag], R_Q=[ss.R_Q.real, ss.R_Q.imag],
+               g_out=0.5 * dg.output_lpf.gain * dg.demodulator.k_per_V, h=h_s,
+               omega=w, b_u=fu.imag, b_A=fA.imag, b_Y=list(_cmat(kap0)[1]), k_quad=r.k_quad_N_per_m,
+               y_A=[yA.real, yA.imag], a_floor=a_floor, steady=ss, x_steady=x_ss, Q=Q)
+    return out
 
 
-def _steady_state_vector(ss, aY, sA, kY, kU, kU2, ki) -> np.ndarray:
-    """The state at the zero-rate steady state (integrals J at zero)."""
+def noise_factor(Q: np.ndarray) -> np.ndarray:
+    """The step's noise factor from the covariance of the first :data:`N_NOISE` states (stacked or not):
+    ``L L^T = Q``, with a zero row for K.
+
+    Parameters
+    ----------
+    Q : ndarray, shape (..., N_NOISE, N_NOISE)
+
+    Returns
+    -------
+    ndarray, shape (..., N, N_NOISE)
+    """
+    Q = np.asarray(Q)
+    Lq = batched_factor(Q.reshape(-1, N_NOISE, N_NOISE))
+    L = np.zeros((len(Lq), N, N_NOISE))
+    L[:, :N_NOISE] = Lq
+    return L.reshape(Q.shape[:-2] + (N, N_NOISE))
+
+
+def steady_vector(dg: Diagram, rate_rad_s: float = 0.0, vref_factor: float = 1.0) -> tuple[np.ndarray, object]:
+    """The model state on the averaged steady state (integrals J at zero).
+
+    Parameters
+    ----------
+    dg : Diagram
+    rate_rad_s : float, optional
+        Constant input rate.
+    vref_factor : float, optional
+        Set-point as a multiple of Vref.
+
+    Returns
+    -------
+    tuple
+        The state (:data:`N` values) and the :class:`~fmvmg_sim.averaged.SteadyState`.
+    """
+    ss = steady_state(dg, rate_rad_s, dg.vref_V * vref_factor)
+    r = dg.resonator
+    w = ss.omega_rad_s
+    _, _, ds = r.envelope_mode("sense", w)
+    A = ss.amplitude_m
+    F = (-r.c_quad_N_s_per_m * 1j * w - r.k_quad_N_per_m - 2j * w * r.m_coriolis_kg * rate_rad_s) * A
+    Ys = ss.Y - ds * F  # the slow part: the steady sense phasor less the feedthrough
     x = np.zeros(N)
-    A, u = ss.amplitude_m, ss.agc_effort_V
-    Y = -sA * A / aY
-    V = kY * Y + kU * u + kU2 * A
-    x[IA], x[IS1], x[II] = A, 0.0, (u / ki if ki > 0 else 0.0)
-    x[IYR], x[IYI] = Y.real, Y.imag
-    x[ISR], x[ISI] = V.real, V.imag
-    return x
+    x[IA] = A
+    x[IS1] = dg.rectifier.describing_gain() * ss.v_ps_amplitude_V + dg.rectifier.offset_V
+    ki = dg.pi.ki_per_s
+    x[II] = (min(ss.agc_effort_V, dg.pi.u_max_V) if ss.agc_saturated else ss.agc_effort_V) / ki if ki > 0 else 0.0
+    x[IYR], x[IYI] = Ys.real, Ys.imag
+    x[ISR], x[ISI] = ss.V_s.real, ss.V_s.imag
+    return x, ss

@@ -1,28 +1,139 @@
-"""One step of the averaged model (see :mod:`fmvmg_sim.envelope.model`), for the compiled roll-out."""
+"""One step of the averaged model (see :mod:`fmvmg_sim.envelope.model`), for the compiled roll-out.
+
+The model is linear in each of its pieces: the PI free or clamped at a limit, the carrier above
+or below the normaliser's floor. A step advances with the exact discretisation of the piece it
+starts in and checks the piece it ends in; a step that changed piece (the clamp reached or left,
+the integrator's anti-windup switched, the drive amplitude below the floor) is flagged and the
+roll-out redoes it in :data:`~fmvmg_sim.envelope.model.N_SUB` sub-steps (:func:`substep`), each
+with the exact discretisation of the piece it starts in; below the floor, the carrier's
+amplitude-proportional gain is applied with the trapezoid rule over a sub-step.
+
+Scheduled inputs (rate, set-point factor, relative quadrature stiffness) come as the start and end
+values of their first-order hold over the step (:meth:`fmvmg_sim.profiles.PiecewiseProfile.step_lines`),
+so a step in a profile on a step edge enters at its time.
+"""
 
 from __future__ import annotations
 
+from blocks import PIController
 from blocks.ops import numpy_ops
 
 from ..carrier.layout import Layout, dot, matvec
-from ..compiled import StepModel
-from .model import IA, II, IJ, IJI, IJR, IS1, ISI, ISR, IYI, IYR, N, PARAMS
+from ..compiled import Refinement, StepModel
+from .model import IA, II, IJ, IJI, IJR, IK, IS1, IYI, IYR, N, N_NOISE, N_SUB, PARAMS, piece_field
 
 STATE = Layout([
-    ("x", (N,)), ("u", ()), ("w_rate", ()), ("vref_f", ()), ("dkq", ()),
-    ("acc_t", ()), ("acc_u", ()), ("rate_V", ()), ("quad_V", ()), ("amp_V", ()), ("agc_V", ()), ("freq_Hz", ()),
+    ("x", (N,)), ("u", ()), ("acc_t", ()), ("acc_u", ()),
+    ("rate_V", ()), ("quad_V", ()), ("amp_V", ()), ("agc_V", ()), ("freq_Hz", ()), ("refine", ()),
 ])
-#: Per-step inputs: N standard normals, then rate (rad/s), set-point factor, reference phase (rad) and the
-#: relative quadrature-stiffness change.
-N_IN = N + 4
+#: Per-step inputs: N_NOISE standard normals; the rate (rad/s), set-point factor and relative quadrature-stiffness
+#: change at the start and at the end of the step; the demodulation reference phase (rad) at its end.
+INPUTS = Layout([("noise", (N_NOISE,)), ("rate", (2,)), ("vref_f", (2,)), ("quad_rel", (2,)), ("phase", ())])
+N_IN = INPUTS.size
 #: Integrate-and-dump accumulators, zeroed after each output sample.
 RESET = ("acc_t", "acc_u")
-_J = (IJ, IJR, IJI)
+_J = (IJ, IJR, IJI, IK)
 TWO_PI = 6.283185307179586
 
 
+def _at(pair, f):
+    """A scheduled input's value at the fraction ``f`` of the step (linear between its start and end)."""
+    if isinstance(f, (int, float)) and f == 0:
+        return pair[0]
+    if isinstance(f, (int, float)) and f == 1:
+        return pair[1]
+    return pair[0] + (pair[1] - pair[0]) * f
+
+
+def _pi(p):
+    P = PARAMS.unpack
+    return PIController(kp=P(p, "kp"), ki_per_s=P(p, "ki"), u_min_V=P(p, "u_min"), u_max_V=P(p, "u_max"))
+
+
+def _pi_state(p, x, v):
+    """Unclamped PI output, its clamp state (high, low, integrator held) at state ``x`` and set-point ``v``."""
+    e = v - x[IS1]
+    pi = _pi(p)
+    u_free = pi.kp * e + pi.ki_per_s * x[II]
+    high, low, hold = pi.clamp_state(u_free, e)
+    return u_free, 1.0 * high, 1.0 * low, 1.0 * hold
+
+
+def _hold_inputs(p, w, x, f0, f1):
+    """The set-point and the first-order-hold input vectors at fractions ``f0`` and ``f1`` of the step."""
+    S, P = INPUTS.unpack, PARAMS.unpack
+    rate, fac, quad = S(w, "rate"), S(w, "vref_f"), S(w, "quad_rel")
+    vref0, kq = P(p, "vref0"), P(p, "k_quad")
+    yA = P(p, "y_A")
+    A = x[IA]
+    Yr, Yi = x[IYR] + yA[0] * A, x[IYI] + yA[1] * A  # the sense mode as the pickoff sees it (slow part + feedthrough)
+    out = []
+    for f in (f0, f1):
+        W, dkq = _at(rate, f), _at(quad, f) * kq
+        out.append([vref0 * _at(fac, f), W * A, W * Yr, W * Yi, dkq * A, dkq * Yr, dkq * Yi])
+    return out
+
+
+def _piece(p, piece, level, x, in0, in1):
+    """The state after the step (or sub-step) in one piece, without the held input and the noise."""
+    P = PARAMS.unpack
+    a = matvec(P(p, piece_field("Phi", piece, level)), x)
+    b0 = matvec(P(p, piece_field("G0", piece, level)), in0)
+    b1 = matvec(P(p, piece_field("G1", piece, level)), in1)
+    Gc = P(p, piece_field("Gc", piece, level))
+    return [a[i] + b0[i] + b1[i] + Gc[i] for i in range(N)]
+
+
+def _plus(x, g, s):
+    return [x[i] + g[i] * s for i in range(N)]
+
+
+def _u_integral(p, x, x1, v0, v1, clamped, U, dt, ops):
+    """The PI output's integral over a step from ``x`` to ``x1``: the held limit, or Kp (Vref - r) + Ki I
+    integrated exactly through the integrals J (of r) and K (of I)."""
+    P = PARAMS.unpack
+    free = P(p, "kp") * (0.5 * (v0 + v1) * dt - (x1[IJ] - x[IJ])) + P(p, "ki") * (x1[IK] - x[IK])
+    return ops.if_else(clamped > 0, U * dt, free)
+
+
+def _outputs(xs, p, w, x1, u_int, u1, rho1, dt, ops):
+    """Integrate-and-dump outputs after a step (or sub-step) of length ``dt`` ending in ``x1``, ``u1``, the PI
+    output's integral over it ``u_int``."""
+    S, P = STATE.unpack, PARAMS.unpack
+    acc_t = S(xs, "acc_t") + dt
+    acc_u = S(xs, "acc_u") + u_int
+    inv_t = 1.0 / acc_t
+    phi1 = INPUTS.unpack(w, "phase")
+    c, sn = ops.cos(phi1), ops.sin(phi1)
+    RI, RQ = P(p, "R_I"), P(p, "R_Q")
+    ri = [RI[0] * c - RI[1] * sn, RI[0] * sn + RI[1] * c]
+    rq = [RQ[0] * c - RQ[1] * sn, RQ[0] * sn + RQ[1] * c]
+    # demodulation with the (phase-rotated) references commutes with the LPF
+    Jv = [x1[IJR] * inv_t, x1[IJI] * inv_t]
+    g = P(p, "g_out")
+    rate_V = g * dot(Jv, ri)
+    quad_V = g * dot(Jv, rq)
+    A1 = ops.fmax(x1[IA], 1e-15)
+    bY, yA = P(p, "b_Y"), P(p, "y_A")
+    Yr, Yi = x1[IYR] + yA[0] * x1[IA], x1[IYI] + yA[1] * x1[IA]
+    freq = (P(p, "omega") + (P(p, "b_u") * rho1 * u1 + P(p, "b_A") * x1[IA] + bY[0] * Yr + bY[1] * Yi) / A1) / TWO_PI
+    return [u1, acc_t, acc_u, rate_V, quad_V, x1[IJ] * inv_t, acc_u * inv_t, freq]
+
+
+def _restart(xs, ops):
+    """The model state with the integrals J restarted at the first step of an output sample."""
+    x = STATE.unpack(xs, "x")
+    first = STATE.unpack(xs, "acc_t") <= 0
+    return [ops.if_else(first, 0.0, x[i]) if i in _J else x[i] for i in range(N)]
+
+
+def _clamp(u, p, ops):
+    P = PARAMS.unpack
+    return ops.fmin(ops.fmax(u, P(p, "u_min")), P(p, "u_max"))
+
+
 def step(xs, p, w, ops=numpy_ops):
-    """Advance the averaged model by one step.
+    """Advance the averaged model by one step in the piece it starts in; flag a change of piece.
 
     Parameters
     ----------
@@ -31,63 +142,95 @@ def step(xs, p, w, ops=numpy_ops):
     p : sequence
         Parameters laid out as :data:`fmvmg_sim.envelope.model.PARAMS`.
     w : sequence
-        ``N`` standard normals, then the rate, set-point factor and reference phase at the end of the step.
+        Inputs laid out as :data:`INPUTS`.
     ops : object, optional
         Math backend.
 
     Returns
     -------
     list
-        Next state.
+        Next state; its ``refine`` field is 1 where the step must be redone in sub-steps.
     """
-    S, P = STATE.unpack, PARAMS.unpack
-    x = S(xs, "x")
-    # the integrals J restart with each output sample (acc_t was zeroed with them)
-    first = S(xs, "acc_t") <= 0
-    x = [ops.if_else(first, 0.0, x[i]) if i in _J else x[i] for i in range(N)]
-    noise = list(w[0:N])
-    rate1, fac1, phi1 = w[N], w[N + 1], w[N + 2]
-    dkq1 = w[N + 3] * P(p, "k_quad")
-    rate0, fac0, dkq0 = S(xs, "w_rate"), S(xs, "vref_f"), S(xs, "dkq")
-    h = P(p, "h")
+    P = PARAMS.unpack
+    x = _restart(xs, ops)
+    fac = INPUTS.unpack(w, "vref_f")
+    v0, v1 = P(p, "vref0") * fac[0], P(p, "vref0") * fac[1]
+    _, high0, low0, hold0 = _pi_state(p, x, v0)
+    sat0 = high0 + low0
+    U = ops.if_else(high0, P(p, "u_max"), P(p, "u_min"))
+    in0, in1 = _hold_inputs(p, w, x, 0, 1)
+    ln = matvec(P(p, "L"), INPUTS.unpack(w, "noise"))
+    free = _piece(p, "free", "step", x, in0, in1)
+    held = _plus(_piece(p, "held", "step", x, in0, in1), P(p, piece_field("Gu", "held", "step")), U)
+    held[II] = ops.if_else(hold0 > 0, x[II], held[II])
+    x1 = [ops.if_else(sat0 > 0, held[i], free[i]) + ln[i] for i in range(N)]
+    u_free1, high1, low1, hold1 = _pi_state(p, x1, v1)
+    u1 = _clamp(u_free1, p, ops)
+    af = P(p, "a_floor")
+    changed = (ops.fabs(high1 - high0) + ops.fabs(low1 - low0) + sat0 * ops.fabs(hold1 - hold0)
+               + (x[IA] < af) + (x1[IA] < af))
+    refine = ops.if_else(changed > 0, 1.0, 0.0)
+    u_int = _u_integral(p, x, x1, v0, v1, sat0, U, P(p, "h"), ops)
+    return x1 + _outputs(xs, p, w, x1, u_int, u1, 1.0, P(p, "h"), ops) + [refine]
+
+
+def substep(xs, p, wj, ops=numpy_ops):
+    """Advance the averaged model by sub-step ``j`` of a refined step (the state is the previous sub-step's).
+
+    Parameters
+    ----------
+    xs : sequence
+        State laid out as :data:`STATE`.
+    p : sequence
+        Parameters.
+    wj : sequence
+        The step's inputs (:data:`INPUTS`) with the sub-step index ``j`` appended.
+    ops : object, optional
+        Math backend.
+
+    Returns
+    -------
+    list
+        State after the sub-step.
+    """
+    P = PARAMS.unpack
+    w, j = list(wj[:N_IN]), wj[N_IN]
+    x = _restart(xs, ops)
+    f0, f1 = j * (1.0 / N_SUB), (j + 1.0) * (1.0 / N_SUB)
+    fac = INPUTS.unpack(w, "vref_f")
     vref0 = P(p, "vref0")
-    v0, v1 = vref0 * fac0, vref0 * fac1
-    kp, ki, umin, umax = P(p, "kp"), P(p, "ki"), P(p, "u_min"), P(p, "u_max")
-    u_free = kp * (v0 - x[IS1]) + ki * x[II]
-    sat = (u_free > umax) + (u_free < umin)
-    u_held = ops.fmin(ops.fmax(u_free, umin), umax)
-    A, Yr, Yi = x[IA], x[IYR], x[IYI]
-    in0 = [v0, rate0 * A, rate0 * Yr, rate0 * Yi, dkq0 * A, dkq0 * Yr, dkq0 * Yi]
-    in1 = [v1, rate1 * A, rate1 * Yr, rate1 * Yi, dkq1 * A, dkq1 * Yr, dkq1 * Yi]
-    ln = matvec(P(p, "L"), noise)
-    a = matvec(P(p, "Phi"), x)
-    b0 = matvec(P(p, "G0"), in0)
-    b1 = matvec(P(p, "G1"), in1)
-    Gc = P(p, "Gc")
-    free = [a[i] + b0[i] + b1[i] + Gc[i] + ln[i] for i in range(N)]
-    a_s = matvec(P(p, "Phi_s"), x)
-    b0s = matvec(P(p, "G0_s"), in0)
-    b1s = matvec(P(p, "G1_s"), in1)
-    Gus, Gcs = P(p, "Gu_s"), P(p, "Gc_s")
-    held = [a_s[i] + b0s[i] + b1s[i] + Gus[i] * u_held + Gcs[i] + ln[i] for i in range(N)]
-    x1 = [ops.if_else(sat > 0, held[i], free[i]) for i in range(N)]
-    u1 = ops.fmin(ops.fmax(kp * (v1 - x1[IS1]) + ki * x1[II], umin), umax)
-    # integrate-and-dump outputs; demodulation with the (phase-rotated) references commutes with the LPF
-    acc_t = S(xs, "acc_t") + h
-    acc_u = S(xs, "acc_u") + 0.5 * (S(xs, "u") + u1) * h
-    inv_t = 1.0 / acc_t
-    c, sn = ops.cos(phi1), ops.sin(phi1)
-    RI, RQ = P(p, "R_I"), P(p, "R_Q")
-    ri = [RI[0] * c - RI[1] * sn, RI[0] * sn + RI[1] * c]
-    rq = [RQ[0] * c - RQ[1] * sn, RQ[0] * sn + RQ[1] * c]
-    Jv = [x1[IJR] * inv_t, x1[IJI] * inv_t]
-    g = P(p, "g_out")
-    rate_V = g * dot(Jv, ri)
-    quad_V = g * dot(Jv, rq)
-    A1 = ops.fmax(x1[IA], 1e-15)
-    bY = P(p, "b_Y")
-    freq = (P(p, "omega") + (P(p, "b_u") * u1 + P(p, "b_A") * x1[IA] + bY[0] * x1[IYR] + bY[1] * x1[IYI]) / A1) / TWO_PI
-    return x1 + [u1, rate1, fac1, dkq1, acc_t, acc_u, rate_V, quad_V, x1[IJ] * inv_t, acc_u * inv_t, freq]
+    v0, v1 = vref0 * _at(fac, f0), vref0 * _at(fac, f1)
+    u_free0, high0, low0, hold0 = _pi_state(p, x, v0)
+    sat0 = high0 + low0
+    U = ops.if_else(high0, P(p, "u_max"), P(p, "u_min"))
+    in0, in1 = _hold_inputs(p, w, x, f0, f1)
+    af = P(p, "a_floor")
+
+    def rho(A):  # the carrier's gain relative to full amplitude (the normaliser's floor)
+        return ops.fmin(1.0, ops.fmax(A, 0.0) / af)
+
+    rho0 = rho(x[IA])
+    # free: the floor's deficit (rho - 1) u as a held input, trapezoidal over the sub-step
+    g_f = P(p, piece_field("Gu", "free", "sub"))
+    base = _piece(p, "free", "sub", x, in0, in1)
+    d0 = (rho0 - 1.0) * u_free0
+    pred = _plus(base, g_f, d0)
+    d1 = (rho(pred[IA]) - 1.0) * _pi_state(p, pred, v1)[0]
+    free = _plus(base, g_f, 0.5 * (d0 + d1))
+    # clamped: the held limit times the carrier's gain, trapezoidal likewise
+    g_h = P(p, piece_field("Gu", "held", "sub"))
+    base = _piece(p, "held", "sub", x, in0, in1)
+    pred = _plus(base, g_h, U * rho0)
+    held = _plus(base, g_h, U * 0.5 * (rho0 + rho(pred[IA])))
+    held[II] = ops.if_else(hold0 > 0, x[II], held[II])
+    last = ops.if_else(j > N_SUB - 1.5, 1.0, 0.0)  # the step's noise enters once, with the last sub-step
+    ln = matvec(P(p, "L"), INPUTS.unpack(w, "noise"))
+    x1 = [ops.if_else(sat0 > 0, held[i], free[i]) + last * ln[i] for i in range(N)]
+    u1 = _clamp(_pi_state(p, x1, v1)[0], p, ops)
+    dt = P(p, "h") * (1.0 / N_SUB)
+    u_int = _u_integral(p, x, x1, v0, v1, sat0, U, dt, ops)
+    return x1 + _outputs(xs, p, w, x1, u_int, u1, rho(x1[IA]), dt, ops) + [0.0]
 
 
-ENVELOPE_MODEL = StepModel("fmvmg_envelope", STATE, PARAMS, N_IN, step, reset=RESET)
+ENVELOPE_MODEL = StepModel("fmvmg_envelope", STATE, PARAMS, N_IN, step, reset=RESET,
+                           refine=Refinement(substep, N_SUB, "refine"))

@@ -207,7 +207,7 @@ def check_step(device: Device, temperature_C: float, kp: float, ki_per_s: float,
     r = res["drive_amplitude_V"][k:]
     sim = step_metrics(np.concatenate([[0.0], tt]), np.concatenate([[v0], r]), v0, v1)
     r_unit = (r - v0) / (v1 - v0)
-    r_pred = np.interp(tt, pred.t_s, pred.r_unit)
+    r_pred = np.interp(tt - dt[k:] / 2, pred.t_s, pred.r_unit)  # a record's sample is the mean over its interval
     return StepCheck(temperature_C=float(temperature_C), kp=float(kp), ki_per_s=float(ki_per_s), predicted=pred,
                      settling_simulated_s=sim["settling_time_s"], overshoot_simulated_pct=sim["overshoot_pct"],
                      t_s=tt, r_simulated_unit=r_unit, r_predicted_unit=r_pred, engine=res.info.get("engine", "?"),
