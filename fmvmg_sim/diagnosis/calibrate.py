@@ -172,15 +172,16 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
         lin = fitter.nominal_lin(theta, base, path, jac)
     fitter.delay_s = theta.get("temperature_delay_s", 0.0)
     # the linearisation at the calibrated unit: its prediction there is the exact model's, and its solve gives the
-    # covariance (not a further step)
+    # covariance (not a further step); the cost is the weighted squares there
     lin = fitter.nominal_lin(theta, base, path, jac)
-    sol = dataclasses.replace(fitter.solve(lin, rows), x=lin.x0.copy())
+    W = 1.0 / fitter.S[rows]
+    r0 = (fitter.Y[rows] - lin.y0[rows]) * W
+    ok = np.isfinite(r0) & fitter.present[None, :]
+    sol = dataclasses.replace(fitter.solve(lin, rows), x=lin.x0.copy(), cost=float(np.sum(r0[ok] ** 2)))
     sd_post = np.sqrt(np.clip(np.diag(sol.cov), 0, None))
     tolv = knobs.tolerance
     # identifiability from the data alone: posterior without the prior
-    W = 1.0 / fitter.S[rows]
     A = (lin.cols[rows] * W[:, :, None])
-    ok = np.isfinite((fitter.Y[rows] - lin.y0[rows]) * W) & fitter.present[None, :]
     M = A[ok]
     H = M.T @ M + np.diag(1.0 / tolv ** 2)
     cov_nd = scaled_inverse(H)
