@@ -182,11 +182,11 @@ def diagnose(record: str | os.PathLike, scenario: str | os.PathLike = "nominal_a
     """
     from .diagnosis.pipeline import N_NULL
     from .diagnosis.pipeline import diagnose as _diagnose
-    from .diagnosis.report import clean
+    from .diagnosis.report import json_report
     from .paths import resolve_scenario
     rep = _diagnose(record, resolve_scenario(scenario), n_null=n_null or N_NULL, seed=seed, progress=progress,
                     log=None if progress else (lambda m: None))
-    return clean(rep)
+    return json_report(rep)
 
 
 def tune(scenario: str | os.PathLike | Scenario = "startup", temperatures_C: Sequence[float] = (-40.0, 25.0, 85.0),

@@ -22,6 +22,7 @@ from .errors import InputError
 from .paths import scenarios_dir
 from .schema import Choice, Num, Text, validate_tree
 from .tomlio import load_toml
+from .uncertainty import TOLERANCE_SCHEMA
 
 _AMP = {"gain": Num(), "gbw_Hz": Num(positive=True), "gbw_tc_per_K": Num(-0.05, 0.05),
         "offset_V": Num(-10, 10), "gain_tc_per_K": Num(-0.01, 0.01)}
@@ -44,6 +45,7 @@ DEVICE_SCHEMA = {
         "q_anchor": Num(positive=True), "q_gas_exponent": Num(-10, 10),
         "quadrature_tc_per_K": Num(-0.1, 0.1),
         "q_extra_tc_per_K": Num(-0.1, 0.1), "split_extra_Hz_per_K": Num(-10, 10),
+        "q_curvature_per_K2": Num(-1e-3, 1e-3),
     },
     "circuit": {
         "drive_pickoff": {"bias_V": Num(positive=True), "dC_dx_F_per_m": Num(positive=True),
@@ -72,10 +74,13 @@ DEVICE_SCHEMA = {
         "flicker_phase_rad2": Num(lo=0), "flicker_output_dps2": Num(lo=0),
         "rate_random_walk_dps_per_sqrt_s": Num(lo=0), "quantization_lsb_V": Num(lo=0),
     },
+    # what the nominal values and laws are not known to better than (fmvmg_sim.uncertainty)
+    "tolerance": TOLERANCE_SCHEMA,
 }
 
 #: Keys a device file may leave out (they default to zero: the unmodelled effects switch them on).
 OPTIONAL_KEYS = {"mechanics.duffing_k3_rel", "thermal.q_extra_tc_per_K", "thermal.split_extra_Hz_per_K",
+                 "thermal.q_curvature_per_K2",
                  "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K"}
 
 DEVICES_DIR = scenarios_dir() / "devices"
@@ -233,6 +238,7 @@ class Device:
         f_s = np.sqrt(k_s / me["m_sense_kg"]) / (2 * np.pi)
         q = {m: float(law.quality_factor(me[f"q_{m}"], temperature_C, T0, th["q_ted"], th["q_anchor"],
                                          th["q_gas_exponent"])) * (1 + th.get("q_extra_tc_per_K", 0.0) * dT)
+             * float(np.exp(th.get("q_curvature_per_K2", 0.0) * dT * dT))
              for m in ("drive", "sense")}
         omega_q = np.deg2rad(me["quadrature_rate_dps"]) * (1 + th["quadrature_tc_per_K"] * dT)
         k_q = 2 * me["m_coriolis_kg"] * 2 * np.pi * f_d * omega_q

@@ -12,11 +12,13 @@ folder is renamed over the destination, so a record is written whole or not at a
 
 from __future__ import annotations
 
+import gzip
 import io
 import math
 import os
 import tempfile
 import warnings
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -107,6 +109,16 @@ def _parse_float(cell: str) -> float:
     return float(cell)
 
 
+def _read_text(p: Path) -> str:
+    """The text of a record file, gunzipped when it starts with the gzip magic bytes (a ``.csv.gz``).
+
+    A byte-order mark, as spreadsheet programs write, is dropped."""
+    raw = p.read_bytes()
+    if raw[:2] == b"\x1f\x8b":
+        raw = gzip.decompress(raw)
+    return raw.decode("utf-8-sig")
+
+
 def read_record(path: str | os.PathLike, required: tuple[str, ...] = REQUIRED_COLUMNS,
                 warn_unknown: bool = True) -> Record:
     """Read and validate a record file.
@@ -114,7 +126,7 @@ def read_record(path: str | os.PathLike, required: tuple[str, ...] = REQUIRED_CO
     Parameters
     ----------
     path : path-like
-        CSV file in the record format.
+        CSV file in the record format, or the same gzipped (``.csv.gz``).
     required : tuple of str, optional
         Columns that must be present (default: those the contract requires).
     warn_unknown : bool, optional
@@ -137,9 +149,11 @@ def read_record(path: str | os.PathLike, required: tuple[str, ...] = REQUIRED_CO
     if not p.is_file():
         raise InputError("file not found", name)
     try:
-        text = p.read_text(encoding="utf-8-sig")  # a byte-order mark, as spreadsheet programs write, is dropped
+        text = _read_text(p)
     except UnicodeDecodeError as exc:
         raise InputError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", name) from None
+    except (OSError, EOFError, zlib.error) as exc:
+        raise InputError(f"not a readable gzip file ({exc})", name) from None
     lines = text.splitlines()
     metadata: dict[str, str] = {}
     header_idx = None
@@ -308,8 +322,8 @@ def data_line_number(path: str | os.PathLike, row: int) -> int | None:
         The line number, or None when the file cannot be read or has no header.
     """
     try:
-        lines = Path(path).read_text(encoding="utf-8-sig").splitlines()
-    except (OSError, UnicodeDecodeError):
+        lines = _read_text(Path(path)).splitlines()
+    except (OSError, EOFError, UnicodeDecodeError, zlib.error):
         return None
     header_idx = next((i for i, s in enumerate(lines) if s.strip() and not s.strip().startswith("#")), None)
     if header_idx is None:

@@ -10,10 +10,12 @@ Keys, accepted values and defaults come from the code (``scenario.SCENARIO_SCHEM
 
 from __future__ import annotations
 
+from .uncertainty import KNOBS
+
 #: Unit suffixes of key names, longest first where one ends another.
 UNIT_SUFFIXES = [
     ("_dps_per_sqrt_s", "deg/s/sqrt(s)"), ("_V_per_sqrtHz", "V/sqrt(Hz)"), ("_rad_per_K", "rad/K"),
-    ("_V_per_K", "V/K"), ("_Hz_per_K", "Hz/K"), ("_F_per_m", "F/m"), ("_N_per_m3", "N/m^3"),
+    ("_mrad", "mrad"), ("_V_per_K", "V/K"), ("_Hz_per_K", "Hz/K"), ("_F_per_m", "F/m"), ("_N_per_m3", "N/m^3"),
     ("_N_per_m", "N/m"), ("_per_K2", "1/K^2"), ("_per_K", "1/K"), ("_per_s", "1/s"), ("_per_V", "1/V"),
     ("_dps2", "(deg/s)^2"), ("_rad2", "rad^2"), ("_dps", "deg/s"), ("_Hz", "Hz"), ("_kg", "kg"), ("_rad", "rad"),
     ("_V", "V"), ("_F", "F"), ("_C", "degC"), ("_s", "s"), ("_m", "m"),
@@ -60,6 +62,7 @@ MEANINGS = {
     "thermal.q_gas_exponent": "gas-damping Q ~ T^-n exponent",
     "thermal.quadrature_tc_per_K": "quadrature temperature coefficient",
     "thermal.q_extra_tc_per_K": "extra linear Q drift (the `q_factor_drift` effect)",
+    "thermal.q_curvature_per_K2": "curvature of the Q law: ln Q gains this times (T - T0)^2",
     "thermal.split_extra_Hz_per_K": "extra mode-split drift (the `mode_split_drift` effect)",
     "circuit.drive_pickoff.bias_V": "proof-mass bias of the drive pickoff",
     "circuit.drive_pickoff.dC_dx_F_per_m": "drive pickoff capacitance gradient",
@@ -118,6 +121,10 @@ MEANINGS = {
     "noise.rate_random_walk_dps_per_sqrt_s": "rate random walk coefficient",
     "noise.quantization_lsb_V": "DAQ quantisation step",
 }
+
+MEANINGS.update({f"tolerance.{k.name}": k.meaning for k in KNOBS})
+MEANINGS["tolerance.law_curvature_per_K2"] = ("how far the laws may be off beyond the temperatures a calibration saw "
+                                              "(times the squared distance, relative to each channel)")
 
 #: The profile tables: their start key and unit suffix.
 PROFILES = [("temperature", "start_C", "C", "degC", False), ("rate", "start_dps", "dps", "deg/s", True),
@@ -279,7 +286,14 @@ def markdown() -> str:
         groups.setdefault(key.rsplit(".", 1)[0] if "." in key else "", []).append((key, spec))
     for group, items in groups.items():
         title = f"[device.{group}]" if group else "[device]"
-        lines += [f"### {title}", "", _row("key", "accepts", "unit", "fmvmg_a", "meaning"), _row(*["---"] * 5)]
+        lines += [f"### {title}", ""]
+        if group == "tolerance":
+            lines += ["What the values above are not known to better than, for one unit and its data acquisition: the",
+                      "diagnosis calibrates each knob within its tolerance (unit values, temperature laws, channel",
+                      "offsets and gains; docs/diagnosis_guide.md), the diagnosis benchmark draws units uniformly within",
+                      "them, and 0 holds a knob at its nominal value. Each is a deviation in the unit its name carries.",
+                      ""]
+        lines += [_row("key", "accepts", "unit", "fmvmg_a", "meaning"), _row(*["---"] * 5)]
         for key, spec in items:
             node = dev
             for part in key.split("."):

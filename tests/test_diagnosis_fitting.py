@@ -2,12 +2,10 @@
 
 import numpy as np
 
-from fmvmg_sim.averaged import scale_factor_V_per_dps
 from fmvmg_sim.diagnosis.data import prepare
 from fmvmg_sim.diagnosis.fitting import Fitter
 from fmvmg_sim.diagnosis.forward import response_table
 from fmvmg_sim.diagnosis.parameters import apply_nominal
-from fmvmg_sim.diagram import build_diagram
 from fmvmg_sim.record import read_record
 from fmvmg_sim.scenario import load_scenario
 from tests.test_diagnosis_helpers import NOMINAL, oven_record
@@ -19,7 +17,7 @@ def test_a_table_asked_for_again_is_the_same_table_and_not_shared(tmp_path):
     build of that device."""
     rec, _ = oven_record(tmp_path, "plain", noise=False, duration_s=3600.0)
     dev = load_scenario(NOMINAL).device_nominal
-    sf = scale_factor_V_per_dps(build_diagram(dev, dev.reference_temperature_C))
+    sf = dev.nominal_scale_factor_V_per_dps
     f = Fitter(prepare(read_record(rec), sf), dev)
     theta = {"q_drive_rel": 0.01, "split_Hz": -0.5}
     eff = {"q_factor_drift": {"q_tc_per_K": -2e-3}}
@@ -43,7 +41,7 @@ def test_fitters_on_one_profile_share_a_table_store(tmp_path):
     grid: with a shared store the second builds nothing for the first's inputs and gets its numbers bit for bit,
     equal to a Fitter of its own; a record on another profile, or another device, builds afresh."""
     dev = load_scenario(NOMINAL).device_nominal
-    sf = scale_factor_V_per_dps(build_diagram(dev, dev.reference_temperature_C))
+    sf = dev.nominal_scale_factor_V_per_dps
     r1, _ = oven_record(tmp_path, "one", noise=False, duration_s=3600.0)
     r2, _ = oven_record(tmp_path, "two", {"q_factor_drift": {"q_tc_per_K": -2e-3}}, seed=2, duration_s=3600.0)
     cold = ("[temperature]\nstart_C = -20.0\n"

@@ -51,8 +51,8 @@ def test_block_length_grows_with_correlation_and_ci_widens():
 
 
 def test_block_bootstrap_resamples_centre_on_the_mean_whatever_lies_at_the_ends():
-    # a slowly varying gain series whose last stretch loses heavily (a fold at the end of a pooled series, as in
-    # benchmark case 90044/32): every value is drawn equally often, so the resampled means centre on the
+    # a slowly varying gain series whose last stretch loses heavily (a fold at the end of a pooled series): every
+    # value is drawn equally often, so the resampled means centre on the
     # sample mean (a moving-block bootstrap under-draws the last stretch: its median sits 0.53 widths high)
     rng = np.random.default_rng(3)
     d = np.convolve(rng.normal(size=500), np.ones(40) / np.sqrt(40), mode="valid")[:432] + 175.0

@@ -60,23 +60,3 @@ def test_the_note_rarely_fires_without_a_gap():
         nulls = [window_stats(prep, _white(prep, rng), m) for _ in range(4)]
         fired += after_training_note(window_stats(prep, _white(prep, rng), m), nulls, end_s)["fires"]
     assert fired <= 10, fired
-
-
-def test_a_record_whose_only_ramp_comes_after_the_training_window(tmp_path):
-    # a temperature-rate term acts only while the oven ramps; with the record's one ramp after the last training
-    # window (76 % of the record) no forward-chained fit can attribute it, whatever its whole-record SNR
-    # (41 for this record, against 4e-6 on the training window: test_diagnosis_cases). The report says so, in the
-    # rate output, and advises moving or repeating the ramp; it attributes nothing to it
-    from fmvmg_sim.diagnosis.pipeline import diagnose
-    from fmvmg_sim.diagnosis.report import markdown
-    from tests.test_validation_cases import THETA
-    from tests.test_diagnosis_helpers import LATE_RAMP, NOMINAL, oven_record
-    late = LATE_RAMP
-    rec, _ = oven_record(tmp_path, "late", {"temperature_rate": {"g_dph_per_K_per_min": 600.0}}, seed=21,
-                         theta=THETA, profile=late)
-    rep = diagnose(rec, NOMINAL, n_null=4, progress=False, log=lambda m: None)
-    note = rep["design"]["gap_after_training"]
-    assert note["fires"] and "rate_V" in note["channels"], note["tests"]
-    assert note["tests"]["rate_V@after"]["value"] > 3 * note["tests"]["rate_V@after"]["null_mean"]
-    assert "temperature_rate" not in rep["accepted"]
-    assert "**Record design:**" in markdown(rep)

@@ -25,6 +25,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "compensate-eval": ("compensate_eval", "honest held-out evaluation of drift compensators"),
     "diagnose": ("diagnose", "sim-to-real gap diagnosis of a record"),
     "diagnose-benchmark": ("diagnose_benchmark", "score the diagnosis on labelled simulated cases"),
+    "diagnose-independent": ("diagnose_independent", "score the diagnosis on labelled records made elsewhere"),
     "import-bmi270": ("import_bmi270", "convert a BMI270 serial log into a record"),
 }
 

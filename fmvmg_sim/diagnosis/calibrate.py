@@ -8,15 +8,22 @@ another, is flagged as not identifiable from this record (its value is the prior
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from .fitting import Fitter, Lin, Solution, scaled_inverse
-from .parameters import BOUND_TOLERANCES, KNOBS_BY_NAME, NOMINAL_KNOBS
+from ..uncertainty import BOUND_TOLERANCES, KNOBS_BY_NAME
+from .parameters import knob_values
 
 #: Posterior/prior standard-deviation ratio above which a parameter is "not identifiable".
 NOT_IDENTIFIABLE_RATIO = 0.5
+#: A step that lowers the calibration's chi-square by less than this, or by less than this share of it, has found
+#: nothing the data can tell: the chi-square is in white block noise, and what is left of it after the first steps is
+#: mostly the rate output's slow noise, which a knob combination can follow a little further at every step.
+MIN_GAIN_CHI2 = 0.5
+MIN_GAIN_REL = 1e-3
 #: |correlation| above which a pair is flagged as confounded.
 CONFOUND_CORR = 0.95
 
@@ -41,6 +48,10 @@ class Calibration:
         Table at the calibrated point.
     iterations : int
     solution : Solution
+    tolerance : dict
+        Each knob's tolerance.
+    objective : float
+        The calibration's objective at the calibrated unit (weighted squares of the training blocks plus the priors).
     """
 
     theta: dict
@@ -51,31 +62,65 @@ class Calibration:
     base: object
     iterations: int
     solution: Solution
+    tolerance: dict
+    objective: float = float("nan")
 
     @property
     def at_bound(self) -> list:
         """Knobs the fit pushed to their bound (BOUND_TOLERANCES x tolerance): the record asks for a unit
         outside its tolerance, itself a sign of an unmodelled effect."""
-        return [k for k, v in self.theta.items() if abs(v) >= 0.999 * BOUND_TOLERANCES * KNOBS_BY_NAME[k].tolerance]
+        return [k for k, v in self.theta.items() if abs(v) >= 0.999 * BOUND_TOLERANCES * self.tolerance[k]]
 
-    def to_json(self) -> dict:
-        """JSON form.
+    def to_json(self, device=None) -> dict:
+        """JSON form: each knob's nominal and calibrated value, its sd and tolerance, and what the record says of it.
+
+        Parameters
+        ----------
+        device : Device, optional
+            The nominal device (for the knobs' values; deviations only without it).
 
         Returns
         -------
         dict
         """
         pinned = self.at_bound
-        return {"parameters": {k: {"value": float(v), "sd": float(self.sd[k]), "identifiable": bool(self.identifiable[k]),
-                                   "tolerance": KNOBS_BY_NAME[k].tolerance, "at_bound": k in pinned}
-                               for k, v in self.theta.items()},
-                "at_bound": pinned,
+        out = {}
+        for k, v in self.theta.items():
+            knob = KNOBS_BY_NAME[k]
+            row = {"value": float(v), "sd": float(self.sd[k]), "identifiable": bool(self.identifiable[k]),
+                   "tolerance": self.tolerance[k], "at_bound": k in pinned,
+                   "beyond_tolerance": bool(abs(v) > self.tolerance[k] + 2.0 * self.sd[k]),
+                   "group": knob.group, "meaning": knob.meaning}
+            if knob.effect:
+                row["effect"] = knob.effect
+            if device is not None:
+                nom, calv = knob_values(device, k, float(v))
+                row.update(nominal=nom, calibrated=calv,
+                           sd_calibrated=abs(knob_values(device, k, float(v) + float(self.sd[k]))[1] - calv))
+            out[k] = row
+        return {"parameters": out, "at_bound": pinned,
+                "not_identifiable": [k for k, ok in self.identifiable.items() if not ok],
                 "confounded_pairs": [{"a": a, "b": b, "corr": float(c)} for a, b, c in self.correlated],
                 "iterations": self.iterations}
 
 
-def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 6, tol: float = 1e-3) -> Calibration:
-    """Gauss-Newton MAP fit of the nominal knobs on the blocks in ``rows``.
+def _objective(fitter: Fitter, rows: np.ndarray, theta: dict, base, path: dict) -> float:
+    """The calibration's objective with the exact model: weighted squares of the training blocks plus the priors."""
+    pred = fitter.through_channels(theta, base.evaluate(path["die_b"], path["rate_b"], path["quad_b"]))
+    r = ((fitter.Y - pred) / fitter.S)[rows][:, fitter.present]
+    prior = np.array([theta[n] for n in fitter.knobs.names]) / fitter.knobs.tolerance
+    return float(np.nansum(r ** 2) + prior @ prior)
+
+
+def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float = 1e-3,
+              refresh: float = 0.05) -> Calibration:
+    """Levenberg-Marquardt MAP fit of the nominal knobs on the blocks in ``rows``.
+
+    Each step solves the linearised problem (the knobs' sensitivities as response tables), damped, and is taken
+    when the exact model's objective (weighted squares plus the priors) falls; the damping falls after a step taken
+    and rises after one refused. The sensitivities are rebuilt wherever a step moves a device knob by more than
+    ``refresh`` of its tolerance (a unit far from the device file, a law far from its nominal form, is not linear
+    over the whole way).
 
     Parameters
     ----------
@@ -83,48 +128,70 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 6, tol: float = 
     rows : ndarray of bool
         Training blocks.
     max_iter : int, optional
+        Steps tried, taken or refused.
     tol : float, optional
-        Stop when every step is below ``tol`` times its tolerance.
+        Stop when every step is below ``tol`` times its tolerance, or a step lowers the objective by less than
+        :data:`MIN_GAIN_CHI2` or :data:`MIN_GAIN_REL` of it.
+    refresh : float, optional
 
     Returns
     -------
     Calibration
     """
-    theta = {k.name: 0.0 for k in NOMINAL_KNOBS}
+    knobs = fitter.knobs
+    dev = np.array([k.on_device for k in knobs.knobs])
+    theta = {n: 0.0 for n in knobs.names}
+    fitter.delay_s = 0.0
     path = fitter.path(None)
     base = fitter.table(theta)
     jac = fitter.nominal_jacobian(theta, base)
-    it = 0
-    for it in range(1, max_iter + 1):
-        lin = fitter.nominal_lin(theta, base, path, jac)
-        sol = fitter.solve(lin, rows)
-        step = np.abs(sol.x - lin.x0) / np.array([k.tolerance for k in NOMINAL_KNOBS])
-        theta = dict(zip(lin.names, map(float, sol.x)))
-        base = fitter.table(theta)
-        if np.max(step) < tol:
-            break
-        if it == 1:  # the sensitivities again, at the first estimate (units are far from the data sheet)
-            fitter._nom_jac = None
-            jac = fitter.nominal_jacobian(theta, base)
+    obj = _objective(fitter, rows, theta, base, path)
     lin = fitter.nominal_lin(theta, base, path, jac)
-    sol = fitter.solve(lin, rows)
-    theta = dict(zip(lin.names, map(float, sol.x)))
-    sd_post = np.sqrt(np.clip(np.diag(sol.cov), 0, None))
-    tolv = np.array([k.tolerance for k in NOMINAL_KNOBS])
-    # identifiability from the data alone: posterior without the prior
+    damping, it = 1e-3, 0
+    for it in range(1, max_iter + 1):
+        sol = fitter.solve(lin, rows, damping=damping)
+        step = (sol.x - lin.x0) / knobs.tolerance
+        trial = dict(zip(lin.names, map(float, sol.x)))
+        fitter.delay_s = trial.get("temperature_delay_s", 0.0)  # the model reads the temperature that late
+        t_base, t_path = fitter.table(trial), fitter.path(None)
+        t_obj = _objective(fitter, rows, trial, t_base, t_path)
+        if t_obj > obj:  # refused: a shorter, steeper step
+            fitter.delay_s = theta.get("temperature_delay_s", 0.0)
+            damping *= 3.0
+            if damping > 1e6:
+                break
+            continue
+        gained = obj - t_obj
+        theta, base, path, obj = trial, t_base, t_path, t_obj
+        damping = max(damping / 2.0, 1e-6)
+        if np.max(np.abs(step)) < tol or gained < max(MIN_GAIN_CHI2, MIN_GAIN_REL * obj):
+            break
+        if np.max(np.abs(step[dev]), initial=0.0) > refresh:
+            fitter._nom_jac = None  # the sensitivities again, where the unit now is
+            jac = fitter.nominal_jacobian(theta, base)
+        lin = fitter.nominal_lin(theta, base, path, jac)
+    fitter.delay_s = theta.get("temperature_delay_s", 0.0)
+    # the linearisation at the calibrated unit: its prediction there is the exact model's, and its solve gives the
+    # covariance (not a further step); the cost is the weighted squares there
+    lin = fitter.nominal_lin(theta, base, path, jac)
     W = 1.0 / fitter.S[rows]
+    r0 = (fitter.Y[rows] - lin.y0[rows]) * W
+    ok = np.isfinite(r0) & fitter.present[None, :]
+    sol = dataclasses.replace(fitter.solve(lin, rows), x=lin.x0.copy(), cost=float(np.sum(r0[ok] ** 2)))
+    sd_post = np.sqrt(np.clip(np.diag(sol.cov), 0, None))
+    tolv = knobs.tolerance
+    # identifiability from the data alone: posterior without the prior
     A = (lin.cols[rows] * W[:, :, None])
-    ok = np.isfinite((fitter.Y[rows] - lin.y0[rows]) * W) & fitter.present[None, :]
     M = A[ok]
     H = M.T @ M + np.diag(1.0 / tolv ** 2)
     cov_nd = scaled_inverse(H)
     sd_nd = np.sqrt(np.clip(np.diag(cov_nd), 0, None))
-    ident = {k.name: bool(sd_nd[i] < NOT_IDENTIFIABLE_RATIO * k.tolerance) for i, k in enumerate(NOMINAL_KNOBS)}
+    ident = {n: bool(sd_nd[i] < NOT_IDENTIFIABLE_RATIO * tolv[i]) for i, n in enumerate(knobs.names)}
     corr = cov_nd / np.outer(sd_nd, sd_nd)
     pairs = []
-    for i in range(len(NOMINAL_KNOBS)):
-        for j in range(i + 1, len(NOMINAL_KNOBS)):
+    for i in range(len(knobs)):
+        for j in range(i + 1, len(knobs)):
             if abs(corr[i, j]) > CONFOUND_CORR:
-                pairs.append((NOMINAL_KNOBS[i].name, NOMINAL_KNOBS[j].name, float(corr[i, j])))
-    sd = {k.name: float(sd_post[i]) for i, k in enumerate(NOMINAL_KNOBS)}
-    return Calibration(theta, sd, ident, pairs, lin, base, it, sol)
+                pairs.append((knobs.names[i], knobs.names[j], float(corr[i, j])))
+    sd = {n: float(sd_post[i]) for i, n in enumerate(knobs.names)}
+    return Calibration(theta, sd, ident, pairs, lin, base, it, sol, dict(zip(knobs.names, map(float, tolv))), obj)

@@ -15,7 +15,7 @@ the two moments are those of the smooth prediction, with variance ``tau_c^2 + (t
 
 Each block is then scored with a misread mixture (:func:`misread_nll`), so that a model error of a step on a
 plateau costs a bounded amount. The white noise ``tau`` is read off the null replicates
-(:func:`~.pipeline.converter_model`).
+(:func:`~.null.converter_model`).
 """
 
 from __future__ import annotations

@@ -490,17 +490,21 @@ def prepare(record: Record, sf_nominal_V_per_dps: float, block_s: float = BLOCK_
     if not np.isfinite(record["rate_dps"]).any():
         raise InputError("rate_dps has no finite sample", name)
     temp = np.interp(t, t[okT], temp[okT])  # NaNs bridged linearly (reported in issues)
-    # a sensor reading with noise is smoothed (Savitzky-Golay, 60 s window fixed in advance)
+    # a sensor reading with noise is smoothed (Savitzky-Golay, 60 s window fixed in advance), on an even time
+    # grid so that a gap in the record does not bend the temperature on either side of it
     d2 = np.diff(temp, 2)
     win = int(round(60.0 / dt)) | 1
-    if len(temp) > win > 3 and np.median(np.abs(d2)) > 1e-6:
-        temp_s = savgol_filter(temp, win, 2, mode="interp")
+    t_even = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+    noisy = len(t_even) > win > 3 and np.median(np.abs(d2)) > 1e-6
+    if noisy:
+        temp_s = np.interp(t, t_even, savgol_filter(np.interp(t_even, t, temp), win, 2, mode="interp"))
         issues["temperature_smoothed_window_s"] = win * dt
     else:
         temp_s = temp
     start = t[0] - dt
     t_rel = t - start
-    first = np.concatenate([[dt], dts])
+    # each sample is a mean over its own sampling interval: after a gap (missing samples), not over the gap
+    first = np.minimum(np.concatenate([[dt], dts]), dt)
     t_mid = t_rel - 0.5 * first
     case_mid = np.interp(t_mid, t_rel, temp_s, left=temp_s[0])
     rate_true = np.nan_to_num(np.asarray(record.columns.get("rate_true_dps", np.zeros_like(t)), dtype=float))
@@ -521,7 +525,7 @@ def prepare(record: Record, sf_nominal_V_per_dps: float, block_s: float = BLOCK_
     blk = np.floor((t_rel - 1e-9 * dt) / block_s).astype(int)
     _, blk = np.unique(blk, return_inverse=True)  # drop empty blocks (gaps)
     dTdt = np.gradient(temp_s, t_rel) * 60.0
-    if len(temp_s) > win > 3:
-        dTdt = savgol_filter(dTdt, win, 1, mode="interp")
+    if len(t_even) > win > 3:
+        dTdt = np.interp(t, t_even, savgol_filter(np.interp(t_even, t, dTdt), win, 1, mode="interp"))
     return Prepared(t_rel, t_mid, case_mid, rate_true_mid, obs, chans, float(sf_nominal_V_per_dps), dt,
                     blk, int(blk.max()) + 1, issues, dTdt, temp_s, float(start), name)

@@ -2,7 +2,7 @@
 
 A verdict of "none" says what the record does not show; a user also needs to know what it could not have shown.
 For each deterministic library effect this module gives the size at which the attribution's acceptance criteria
-(:func:`.attribute.why_not`, :meth:`.attribute.Scorer.folds_ok`) would pass with probability :data:`POWER` were
+(:data:`.criteria.CRITERIA`, :meth:`.heldout.Scorer.folds_ok`) would pass with probability :data:`POWER` were
 the effect there: the minimum detectable effect (MDE).
 
 The limit is read at the calibrated unit, from the record's design (its temperature profile, applied rate, noise and
@@ -29,7 +29,7 @@ folds), never from a fit of the effect. Method, one amplitude at a time:
   - each fold's held-out total is ``I_k - c_k d_k^2 + sqrt(2 I_k) eta_k``: what the effect carries there, less what
     its refit's estimation error costs (``d_k`` standard normal, ``c_k = I_k / (a^2 F_k)``), plus the held-out
     noise; a fold passes when it exceeds ``FOLD_MIN_NATS`` and ``1.96 sqrt(2 I_k)`` (its interval's lower end above
-    zero), and the folds carry the effect as :meth:`~.attribute.Scorer.folds_ok` asks (enough passing folds, the one
+    zero), and the folds carry the effect as :meth:`~.heldout.Scorer.folds_ok` asks (enough passing folds, the one
     testable fold, or folds that carry it together);
   - the pooled held-out interval excludes zero.
 
@@ -54,12 +54,13 @@ import numpy as np
 from scipy.stats import norm
 
 from ..effects import MODELS
-from .attribute import (DELTA_BIC_MAX, DETERMINISTIC, FOLD_CONSISTENCY_REL, FOLD_INFO_NATS, FOLD_JOIN_NATS,
-                        FOLD_MIN_NATS, FOLDS_COMBINED_Z, PARAM_Z_MIN, Scorer)
+from .attribution import DETERMINISTIC
+from .criteria import DELTA_BIC_MAX, PARAM_Z_MIN
+from .heldout import (FOLD_CONSISTENCY_REL, FOLD_INFO_NATS, FOLD_JOIN_NATS, FOLD_MIN_NATS, FOLDS_COMBINED_Z,
+                      Scorer)
 from .fitting import DEVICE_EFFECTS, bounded_step
 from .likelihood import expected_gain, fit_params
 from .model import EffectModel
-from .parameters import NOMINAL_KNOBS
 
 #: Probability of attribution at the reported detection limit.
 POWER = 0.9
@@ -186,7 +187,7 @@ def pass_rate(z_mean: float | None, I_train: float, k: int, n: int, folds: list,
     """Probability that an effect passes the acceptance criteria (module docstring), from what it carries.
 
     Simulated from the statistics' sampling distributions, the criteria applied as
-    :func:`.attribute.why_not` and :meth:`.attribute.Scorer.folds_ok` apply them.
+    :data:`.criteria.CRITERIA` and :meth:`.heldout.Scorer.folds_ok` apply them.
 
     Parameters
     ----------
@@ -298,7 +299,7 @@ def effect_limits(scorer: Scorer, name: str) -> dict:
         # sizes from zero: the amplitudes at 0, the shape parameters at their reference
         em.values[name] = {p: ref.get(p, 0.0) for p in MODELS[name]}
     em._build_safely()
-    K0 = len(NOMINAL_KNOBS)
+    K0 = len(f.knobs)
     if name == "thermal_lag":
         # the unlagged path, the lag's own column and the offset it is fitted with
         path = f.path(None)
@@ -323,7 +324,7 @@ def effect_limits(scorer: Scorer, name: str) -> dict:
     out, beyond = {}, []
     for p, j in targets.items():
         refit_tr = _Refit(lin, j, f, scorer.train, base, scorer.train, par)
-        refit_k = [_Refit(lin, j, f, fd["train"], base, fd["scored"], par) for fd in scorer.folds]
+        refit_k = [_Refit(lin, j, f, fd["train"], base, fd["test"], par) for fd in scorer.folds]
         draws = _draws(len(refit_k), k)
 
         def pw(a, refit_tr=refit_tr, refit_k=refit_k, draws=draws):
@@ -341,7 +342,7 @@ def effect_limits(scorer: Scorer, name: str) -> dict:
         # parameter that is an effect of either sign; for one that cannot change sign (a feedthrough capacitance) the
         # mirrored column stands in for the knobs' room on their other side. A calibration that has already absorbed
         # part of an effect holds a knob at its bound on the effect's side, and the physical sign alone then reads
-        # a limit far too small (feedthroughs of signature SNR 0.3-1.5 missed at 1.3-22 times it, 90550-90551)
+        # a limit far too small
         signs = (1.0, -1.0)
         lims = [_solve_mde(lambda a, sg=sg: pw(sg * a), hi) for sg in signs]
         mde = None if any(v is None for v in lims) else max(lims)

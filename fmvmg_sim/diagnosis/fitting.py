@@ -20,7 +20,8 @@ from ..effects import MODELS, EffectSet
 from .converter import Converter, misread_nll, staircase_moments
 from .data import FLOORS, Prepared
 from .forward import CHANNELS, ResponseTable, response_table, temperature_grid
-from .parameters import BOUND_TOLERANCES, NOMINAL_KNOBS, apply_effects, apply_nominal
+from ..uncertainty import law_curvature
+from .parameters import KnobSet, apply_effects, apply_nominal
 
 #: Effects folded into the device (temperature laws); the others act on the path or the noise.
 DEVICE_EFFECTS = ("demod_phase_drift", "quadrature_drift", "q_factor_drift", "mode_split_drift",
@@ -133,11 +134,16 @@ class Fitter:
         A store of response tables shared with other Fitters. A table depends only on the device, the
         temperature grid and its inputs, so Fitters on records of one profile (several simulations of the same
         oven and rate table) reuse each other's tables; the store keeps each device it holds tables of.
+    quadrature_polarity : float, optional
+        +1 or -1: the sign the record's quadrature output carries against the device's (which way the quadrature
+        reference is wired; the demodulated outputs turn the other way with the phase error under the other sign).
     """
 
-    def __init__(self, prep: Prepared, device, tables: dict | None = None):
+    def __init__(self, prep: Prepared, device, tables: dict | None = None, quadrature_polarity: float = 1.0):
         self.prep = prep
         self.device0 = device
+        #: Sign of the recorded quadrature output against the device's (the quadrature reference's wiring)
+        self.quadrature_polarity = float(quadrature_polarity)
         self.Y = prep.block_obs()
         self.S = prep.block_sigma()
         #: Blocks where the applied rate changes (and the next): the quasi-static model does not
@@ -149,6 +155,15 @@ class Fitter:
         c = prep.case_C
         self.grid = temperature_grid(np.min(c) - 6.0, np.max(c) + 6.0)
         self.rate_b = prep.block_mean(prep.rate_true_dps)
+        #: The nominal knobs (the device's stated uncertainty)
+        self.knobs = KnobSet.of(device)
+        self._chan = [(k, CHANNELS.index(k.channel)) for k in self.knobs.knobs
+                      if not k.on_device and k.channel in CHANNELS]
+        #: How much later than the channels the temperature is read (s): the model's input is the reading
+        #: this much later (the calibrated ``temperature_delay_s``)
+        self.delay_s = 0.0
+        #: Each block's recorded temperature from the device's reference (the channels' gain coefficients)
+        self._dT_b = np.nan_to_num(prep.block_mean(prep.case_C) - device.reference_temperature_C)
         self._nom_jac = None
         self._nom_jac_board = None
         self._nom_jac_theta = None
@@ -161,6 +176,11 @@ class Fitter:
         self.S_score = self.S
         #: Channels read through a coarse converter, by index (:meth:`set_converter`)
         self.converter: dict[int, Converter] = {}
+        #: Block sigma of the residuals read against the null (noise plus the laws' accuracy beyond the
+        #: calibration's temperatures; :meth:`set_law_accuracy`)
+        self.S_loc = self.S
+        self._curvature = law_curvature(device)
+        self._level = np.zeros_like(self.S)
 
     # ---- devices and tables -------------------------------------------------------------
     def device(self, theta: dict, effects: dict | None = None):
@@ -198,6 +218,7 @@ class Fitter:
         ResponseTable
         """
         eff = effects or {}
+        theta = {k: v for k, v in theta.items() if k not in self._channel_names()}
         rate = rate or self.has_rate
         # a fit often asks again for a table it built before (the nominal point of every effect without a
         # device part, a retried fit's start): kept by the exact inputs when they are all Python numbers
@@ -217,6 +238,64 @@ class Fitter:
         return ResponseTable(tab.grid_C, tab.base.copy(), tab.d_rate.copy(), tab.d_quad.copy(),
                              *(None if a is None else a.copy()
                                for a in (tab.d_board, tab.d2_board, tab.d_rate_board, tab.d_quad_board)))
+
+    def _channel_names(self) -> set:
+        return {k.name for k, _ in self._chan}
+
+    def channel_gains(self, theta: dict) -> np.ndarray:
+        """``(1 + gain)(1 + tc (T - T0))`` of each channel on each block at ``theta`` (1 where no gain knob acts),
+        the quadrature output's times its polarity.
+
+        Parameters
+        ----------
+        theta : dict
+
+        Returns
+        -------
+        ndarray, shape (n_blocks, C)
+        """
+        g = np.ones((self.prep.n_blocks, len(CHANNELS)))
+        g[:, CHANNELS.index("quadrature_V")] = self.quadrature_polarity
+        for k, c in self._chan:
+            if k.kind == "gain":
+                g[:, c] += g[:, c] * theta.get(k.name, 0.0)
+            elif k.kind == "gain_tc":
+                g[:, c] += g[:, c] * theta.get(k.name, 0.0) * self._dT_b
+        return g
+
+    def through_channels(self, theta: dict, raw: np.ndarray) -> np.ndarray:
+        """Block predictions of the device (``raw``, shape (n, C)) as recorded through the channel knobs.
+
+        Parameters
+        ----------
+        theta : dict
+        raw : ndarray
+
+        Returns
+        -------
+        ndarray
+        """
+        y = raw * self.channel_gains(theta)
+        for k, c in self._chan:
+            if k.kind == "offset":
+                y[:, c] += theta.get(k.name, 0.0)
+        return y
+
+    def predict(self, theta: dict, effects: dict | None = None) -> np.ndarray:
+        """Block predictions of the nominal model at ``theta`` with ``effects`` (their device and path parts).
+
+        Parameters
+        ----------
+        theta : dict
+        effects : dict, optional
+
+        Returns
+        -------
+        ndarray, shape (n_blocks, C)
+        """
+        path = self.path({n: v for n, v in (effects or {}).items() if n in PATH_EFFECTS})
+        raw = self.table(theta, effects, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
+        return self.through_channels(theta, raw)
 
     def diff_table(self, t1: ResponseTable, t0: ResponseTable, step: float) -> ResponseTable:
         """(t1 - t0) / step as a table.
@@ -257,11 +336,11 @@ class Fitter:
                 b0 = self.table(theta, board=True)
                 self._nom_jac_board = (key, [self.diff_table(
                     self.table({**theta, k.name: theta.get(k.name, 0.0) + k.step}, board=True), b0, k.step)
-                    for k in NOMINAL_KNOBS])
+                    for k in self.knobs.device_knobs])
             return self._nom_jac_board[1]
         if self._nom_jac is None:
             out = []
-            for k in NOMINAL_KNOBS:
+            for k in self.knobs.device_knobs:
                 th = dict(theta)
                 th[k.name] = th.get(k.name, 0.0) + k.step
                 out.append(self.diff_table(self.table(th), base, k.step))
@@ -284,17 +363,18 @@ class Fitter:
             ``relax_b`` (t in s for stress relaxation templates), ``board_b`` (the board, i.e. the case, minus the
             die, K; None without a thermal lag).
         """
-        key = repr(sorted((effects or {}).items()))
+        key = repr((sorted((effects or {}).items()), self.delay_s))
         if key in self._paths:
             return self._paths[key]
         p = self.prep
         fx = EffectSet({k: v for k, v in (effects or {}).items() if k in PATH_EFFECTS})
-        die = fx.die_temperature(p.t_mid_s, p.case_C)
+        case = p.case_C if not self.delay_s else np.interp(p.t_mid_s + self.delay_s, p.t_mid_s, p.case_C)
+        die = fx.die_temperature(p.t_mid_s, case)
         sig = fx.signals(p.t_mid_s, die)
         out = dict(die=die, die_b=p.block_mean(die), rate_b=self.rate_b + p.block_mean(sig["rate_dps"]),
                    quad_b=p.block_mean(sig["quad_rel"]))
         out["dTdt_b"] = p.block_mean(np.gradient(die, p.t_mid_s) * 60.0) if len(die) > 1 else np.zeros(p.n_blocks)
-        out["board_b"] = p.block_mean(fx.board_temperature(p.t_mid_s, p.case_C) - die) if fx.get("thermal_lag") else None
+        out["board_b"] = p.block_mean(fx.board_temperature(p.t_mid_s, case) - die) if fx.get("thermal_lag") else None
         if len(self._paths) > 64:
             self._paths.clear()
         self._paths[key] = out
@@ -317,17 +397,31 @@ class Fitter:
         """
         jac = jac if jac is not None else self.nominal_jacobian(theta, base)
         die, rate, quad = path["die_b"], path["rate_b"], path["quad_b"]
-        y0 = base.evaluate(die, rate, quad, path.get("board_b"))
         board = path.get("board_b")
-        cols = np.stack([j.evaluate(die, rate, None, board if j.d_board is not None else None) for j in jac], axis=-1)
-        K = len(NOMINAL_KNOBS)
-        return Lin(y0, cols, [k.name for k in NOMINAL_KNOBS], np.array([theta.get(k.name, 0.0) for k in NOMINAL_KNOBS]),
-                   np.array([k.tolerance for k in NOMINAL_KNOBS]),
-                   np.array([max(-BOUND_TOLERANCES * k.tolerance, -0.9) if k.kind.endswith("rel")
-                             else -BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]),
-                   np.array([BOUND_TOLERANCES * k.tolerance for k in NOMINAL_KNOBS]))
+        raw = base.evaluate(die, rate, quad, board)
+        gain = self.channel_gains(theta)
+        y0 = self.through_channels(theta, raw)
+        dev = iter(jac)
+        cols = []
+        for k in self.knobs.knobs:
+            if k.on_device:
+                j = next(dev)
+                cols.append(j.evaluate(die, rate, None, board if j.d_board is not None else None) * gain)
+                continue
+            if k.kind == "delay":
+                # read d later, the temperature the channels saw is the reading plus d dT/dt
+                cols.append(np.nan_to_num(base.slope(die)) * (path["dTdt_b"] / 60.0)[:, None] * gain)
+                continue
+            col = np.zeros_like(raw)
+            c = CHANNELS.index(k.channel)
+            sign = self.quadrature_polarity if k.channel == "quadrature_V" else 1.0
+            col[:, c] = {"gain": sign * raw[:, c], "gain_tc": sign * raw[:, c] * self._dT_b}.get(k.kind, 1.0)
+            cols.append(col)
+        ks = self.knobs
+        return Lin(y0, np.stack(cols, axis=-1), ks.names, np.array([theta.get(n, 0.0) for n in ks.names]),
+                   ks.tolerance.copy(), ks.lo, ks.hi)
 
-    def solve(self, lin: Lin, rows: np.ndarray, Y: np.ndarray | None = None) -> Solution:
+    def solve(self, lin: Lin, rows: np.ndarray, Y: np.ndarray | None = None, damping: float = 0.0) -> Solution:
         """Weighted, prior-regularised, bounded linear least squares on the blocks in ``rows``.
 
         Parameters
@@ -337,6 +431,9 @@ class Fitter:
             Blocks to fit.
         Y : ndarray, optional
             Other observations on the same blocks (a null replicate); default the record's.
+        damping : float, optional
+            Levenberg-Marquardt damping of the step (``damping`` times the normal matrix's diagonal added to it;
+            the covariance is the undamped one's).
 
         Returns
         -------
@@ -359,7 +456,8 @@ class Fitter:
         MtM, Mtb = M.T @ M, M.T @ b
         PtP, Ptb = P.T @ P, P.T @ pb
         H, g = MtM + PtP, Mtb + Ptb
-        d, ds, lo, hi = bounded_step(H, g, lin.lo - lin.x0, lin.hi - lin.x0)
+        Hd = H + damping * np.diag(np.diag(H)) if damping else H
+        d, ds, lo, hi = bounded_step(Hd, g, lin.lo - lin.x0, lin.hi - lin.x0)
         x = lin.x0 + d
         cost = float(b @ b - 2 * d @ Mtb + d @ MtM @ d)
         cov0 = scaled_inverse(H)  # H = M.T @ M + P.T @ P
@@ -399,6 +497,41 @@ class Fitter:
         fl2 = (slope * die_floor_K) ** 2 + (rel_floor * swing[None, :]) ** 2
         self.S_score = np.sqrt(self.S ** 2 + fl2)
 
+    def set_law_accuracy(self, table: ResponseTable, die_b: np.ndarray, train: np.ndarray) -> None:
+        """Read the residuals against the null (:meth:`residual`) with the laws' accuracy beyond the training window.
+
+        Parameters
+        ----------
+        table : ResponseTable
+            The calibrated nominal model (each channel's level).
+        die_b : ndarray
+            Block die temperatures.
+        train : ndarray of bool
+            The calibration's training blocks.
+        """
+        die = np.nan_to_num(die_b, nan=float(np.nanmean(die_b)))
+        self._level = np.abs(table.evaluate(die))
+        self.S_loc = np.sqrt(self.S ** 2 + self.law_sd(train) ** 2)
+
+    def law_sd(self, train: np.ndarray) -> np.ndarray:
+        """How far the calibrated laws may be off on each block, calibrated on ``train``
+        (:data:`fmvmg_sim.uncertainty.LAW_CURVATURE` times the squared distance from the training temperatures).
+
+        Parameters
+        ----------
+        train : ndarray of bool
+
+        Returns
+        -------
+        ndarray, shape (n_blocks, C)
+        """
+        T = self.prep.block_mean(self.prep.case_C)
+        Tt = T[train & np.isfinite(T)]
+        if not Tt.size or self._curvature == 0.0:
+            return np.zeros_like(self.S)
+        d = np.nan_to_num(np.maximum(np.maximum(Tt.min() - T, T - Tt.max()), 0.0))
+        return self._curvature * self._level * (d ** 2)[:, None]
+
     def residual(self, pred: np.ndarray, scoring: bool = False, Y: np.ndarray | None = None) -> np.ndarray:
         """(observed - predicted) / sigma per block and channel; NaN for absent channels.
 
@@ -406,7 +539,8 @@ class Fitter:
         ----------
         pred : ndarray, shape (n, C)
         scoring : bool, optional
-            Divide by the scoring sigma (model floor included) instead of the noise sigma.
+            Divide by the scoring sigma (model floor included) instead of the noise sigma and the laws' accuracy
+            beyond the calibration's training window (:meth:`set_law_accuracy`).
         Y : ndarray, optional
             Other observations on the same blocks (a null replicate); default the record's.
 
@@ -414,7 +548,25 @@ class Fitter:
         -------
         ndarray
         """
-        Z = ((self.Y if Y is None else Y) - pred) / (self.S_score if scoring else self.S)
+        Z = ((self.Y if Y is None else Y) - pred) / (self.S_score if scoring else self.S_loc)
+        Z[:, ~self.present] = np.nan
+        return Z
+
+    def noise_residual(self, pred: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
+        """(observed - predicted) / noise sigma per block and channel (no model floor, no law accuracy); NaN for
+        absent channels.
+
+        Parameters
+        ----------
+        pred : ndarray, shape (n, C)
+        Y : ndarray, optional
+            Other observations on the same blocks (a null replicate); default the record's.
+
+        Returns
+        -------
+        ndarray
+        """
+        Z = ((self.Y if Y is None else Y) - pred) / self.S
         Z[:, ~self.present] = np.nan
         return Z
 

@@ -22,6 +22,7 @@ from tqdm import tqdm
 from ..analysis.allan import allan_deviation
 from ..noise import quantize
 from ..profiles import PiecewiseProfile
+from ..uncertainty import apply_channels
 from .data import Prepared
 from .forward import CHANNELS, IQUAD, IRATE
 
@@ -38,14 +39,14 @@ LOCATED = ("allan_bands", "regimes")
 CLOSURE_MIN = 0.5
 #: A statistic this many null standard deviations *below* its null (p ~ 1e-23 under a null that describes it) is
 #: not comparable with the null: the replicates carry something the record does not, and a gap there cannot be
-#: located. On the 120 cases of benchmark seeds 90060-90062 only the drive frequency fell there (108 of 120, z -48
-#: to -184: the replicates run on a temperature profile thinned to a point per 5 s, which cuts every ramp corner);
-#: every other statistic stayed above -4.7.
+#: located (the drive frequency of a record with fast ramps can fall there: the replicates run on the temperature
+#: thinned to a point per 5 s, which cuts every ramp corner).
 NOT_COMPARABLE_Z = -10.0
 
 
 def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool = False,
-                 raw: list | None = None) -> list[dict]:
+                 raw: list | None = None, knobs: list | None = None, delay_s: float = 0.0,
+                 quadrature_polarity: float = 1.0) -> list[dict]:
     """Simulate the calibrated nominal model with noise on the record's inputs, once per device.
 
     Parameters
@@ -60,6 +61,14 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
     raw : list, optional
         When given, each replicate's quantised channels before the record's lattice is applied are appended
         to it.
+    knobs : list of dict, optional
+        Each replicate's knob values: its channels go through its channel knobs
+        (:func:`fmvmg_sim.uncertainty.apply_channels`), as the record's went through the calibrated ones.
+    delay_s : float, optional
+        How much later than the channels the record's temperature is read: the replicates run on the
+        temperature the record's channels saw.
+    quadrature_polarity : float, optional
+        The sign the record's quadrature output carries against the device's.
 
     Returns
     -------
@@ -77,7 +86,8 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
     keep[steps] = True
     keep[np.minimum(steps + 1, len(keep) - 1)] = True
     tp = np.concatenate([[0.0], prep.t_s[keep]])
-    Tp = np.concatenate([[prep.case_at_t_C[0]], prep.case_at_t_C[keep]])
+    T_seen = np.interp(prep.t_s + delay_s, prep.t_s, prep.case_at_t_C) if delay_s else prep.case_at_t_C
+    Tp = np.concatenate([[T_seen[0]], T_seen[keep]])
     rp = np.concatenate([[prep.rate_true_dps[0]], prep.rate_true_dps[keep]])
     idx = np.clip(np.round(prep.t_s / dt).astype(int) - 1, 0, None)
     # the record's own resolution (a coarser converter than the scenario's) applies to the null too
@@ -98,6 +108,11 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
         res = run_envelope(s, progress=False, log=lambda m: None)
         i = np.clip(idx, 0, len(res.time_s) - 1)
         x = {c: np.asarray(res[c])[i] for c in CHANNELS}
+        x["quadrature_V"] = quadrature_polarity * x["quadrature_V"]
+        if knobs is not None:  # the channels the replicate's data acquisition writes (gains read the record's T)
+            rec_T = {**x, "temperature_C": prep.case_at_t_C, "time_s": prep.t_s}
+            x = {c: v for c, v in apply_channels(knobs[k], rec_T, device.reference_temperature_C).items()
+                 if c in CHANNELS}
         if raw is not None:
             raw.append({c: x[c] for j, c in enumerate(CHANNELS) if lattice[j] > 0})
         out.append({c: quantize(x[c], lattice[j]) for j, c in enumerate(CHANNELS)})

@@ -20,7 +20,6 @@ from scipy.optimize import minimize_scalar
 from ..effects import MODELS, hysteresis_state
 from .calibrate import Calibration
 from .fitting import DEVICE_EFFECTS, Fitter, Lin, Solution
-from .parameters import NOMINAL_KNOBS
 
 #: Nonlinear parameter of each path effect: (name, grid).
 NONLINEAR = {
@@ -117,28 +116,6 @@ class ModelFit:
         return self._ctx["refit"](rows)
 
 
-def held_lin(lin: Lin, held: dict) -> Lin:
-    """``lin`` with the knobs in ``held`` fixed at the given values (both bounds there).
-
-    Parameters
-    ----------
-    lin : Lin
-    held : dict
-        ``{knob: value}``.
-
-    Returns
-    -------
-    Lin
-    """
-    if not held:
-        return lin
-    lo, hi, x0 = lin.lo.copy(), lin.hi.copy(), lin.x0.copy()
-    for i, nm in enumerate(lin.names):
-        if nm in held:
-            lo[i] = hi[i] = x0[i] = held[nm]
-    return Lin(lin.y0, lin.cols, lin.names, x0, lin.prior_sd, lo, hi)
-
-
 class EffectModel:
     """Builds and solves the linearised model of ``names`` (effects) on top of a calibration.
 
@@ -150,21 +127,11 @@ class EffectModel:
         Effects to fit (device and path effects).
     fixed : dict, optional
         ``{effect: {nonlinear param: value}}`` held fixed (e.g. the first effect of a pair).
-    hold_unidentified : bool, optional
-        Hold the nominal knobs the calibration flags as not identifiable at their calibrated values. The
-        record does not determine them, so an effect's amplitude can trade against them: with no applied rate
-        the sense gain is free within its prior, and a temperature-rate term beside it can take any size
-        within the gain's tolerance (and be refused as pinned at its bound). Default False: every knob free,
-        whose slack also absorbs model error (the attribution retries only a fit refused at a bound with
-        them held, and takes the retried fit only strictly inside its bounds: :func:`.attribute.evaluate`).
     """
 
-    def __init__(self, fitter: Fitter, cal: Calibration, names: list, fixed: dict | None = None,
-                 hold_unidentified: bool = False):
+    def __init__(self, fitter: Fitter, cal: Calibration, names: list, fixed: dict | None = None):
         self.f = fitter
         self.cal = cal
-        self.held = ({k: float(cal.theta[k]) for k, ok in cal.identifiable.items() if not ok}
-                     if hold_unidentified else {})
         self.names = list(names)
         self.fixed = fixed or {}
         self.values = {n: _start(n) for n in self.names}
@@ -215,7 +182,7 @@ class EffectModel:
         if "thermal_lag" in self.names:
             lag = {"thermal_lag": {"tau_s": nl.get("thermal_lag", self.values["thermal_lag"]["tau_s"]), "offset_K": 0.0}}
         path = self.f.path(lag)
-        lin = held_lin(self.f.nominal_lin(self.theta, self.base, path, self.cal_jac()), self.held)
+        lin = self.f.nominal_lin(self.theta, self.base, path, self.cal_jac())
         die, rate = path["die_b"], path["rate_b"]
         cols, names, x0, lo, hi = [], [], [], [], []
         for (n, p), tab in self.dev_jac:
@@ -246,7 +213,8 @@ class EffectModel:
             lo.append(MODELS[n_][p_].lo)
             hi.append(MODELS[n_][p_].hi)
         if cols:
-            C = np.stack(cols, axis=-1)
+            # through the calibrated channel gains, as the nominal columns are
+            C = np.stack(cols, axis=-1) * self.f.channel_gains(self.theta)[:, :, None]
             lin = Lin(lin.y0, np.concatenate([lin.cols, C], axis=-1), lin.names + names,
                       np.concatenate([lin.x0, x0]),
                       np.concatenate([lin.prior_sd, [effect_prior_sd(*nm.split(".")) for nm in names]]),
@@ -289,11 +257,12 @@ class EffectModel:
         return nl, lin, self.f.solve(lin, rows)
 
     def _unpack(self, lin: Lin, x: np.ndarray, nl: dict) -> tuple[dict, dict]:
-        theta = {k.name: float(x[i]) for i, k in enumerate(NOMINAL_KNOBS)}
+        K0 = len(self.f.knobs)
+        theta = {nm: float(x[i]) for i, nm in enumerate(lin.names[:K0])}
         eff = {n: dict(self.values[n]) for n in self.names}
-        for i, nm in enumerate(lin.names[len(NOMINAL_KNOBS):]):
+        for i, nm in enumerate(lin.names[K0:]):
             n, p = nm.split(".")
-            eff[n][p] = float(x[len(NOMINAL_KNOBS) + i])
+            eff[n][p] = float(x[K0 + i])
         for n, v in nl.items():
             eff[n][NONLINEAR[n][0]] = float(v)
         return theta, eff
@@ -327,10 +296,11 @@ class EffectModel:
         sd, sd_noise = {}, {}
         sds = np.sqrt(np.clip(np.diag(sol.cov), 0, None))
         sdn = np.sqrt(np.clip(np.diag(sol.cov_noise), 0, None))
-        for i, nm in enumerate(lin.names[len(NOMINAL_KNOBS):]):
+        K0 = len(self.f.knobs)
+        for i, nm in enumerate(lin.names[K0:]):
             n, p = nm.split(".")
-            sd.setdefault(n, {})[p] = float(sds[len(NOMINAL_KNOBS) + i])
-            sd_noise.setdefault(n, {})[p] = float(sdn[len(NOMINAL_KNOBS) + i])
+            sd.setdefault(n, {})[p] = float(sds[K0 + i])
+            sd_noise.setdefault(n, {})[p] = float(sdn[K0 + i])
 
         def refit(r):
             nl2, lin2, sol2 = self._search(r)
@@ -339,7 +309,7 @@ class EffectModel:
         mf._ctx["refit"] = refit
         mf._ctx["pred"] = lin.predict(sol.x)
         # the training cost with a nonlinear parameter held elsewhere (the linear ones re-solved): how hard the
-        # data pull it to where it was fitted (attribute.bounds_verdict, the attribution floor)
+        # data pull it to where it was fitted (evaluation.bounds_verdict, the attribution floor)
         mf._ctx["cost_at"] = lambda over, r: self.f.solve(self._lin({**nl, **over}), r).cost
         return mf
 

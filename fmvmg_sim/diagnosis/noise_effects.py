@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import localize as loc
 from .data import Prepared, on_lattice
 from .forward import IRATE
 
@@ -144,3 +145,57 @@ def flicker_level(excess_var_dps2: float) -> float:
         (deg/s)^2.
     """
     return max(excess_var_dps2, 0.0) / (2 * np.log(2))
+
+
+class FlickerBand:
+    """The flicker band (10-300 s) of a model's rate residual against the null's, on the held-out and training samples.
+
+    The band is read without the slow deterministic signatures a temperature profile can leave
+    (:func:`.localize.slow_templates`: an unmodelled gradient term would read as extra flicker), in the record and in
+    the null alike. Extra flicker is found when the held-out band stands :data:`FLICKER_Z_HELDOUT` and the training
+    band :data:`FLICKER_Z_TRAIN` null standard deviations above the null, and the held-out excess is flat in tau
+    rather than rising as tau^2 (:func:`band_shape`: a slow wander).
+
+    Parameters
+    ----------
+    prep : Prepared
+    null_heldout, null_train : list of ndarray
+        The null replicates' Allan deviations on the same samples (:func:`.localize.residual_allan`).
+    """
+
+    def __init__(self, prep: Prepared, null_heldout: list, null_train: list):
+        self.prep = prep
+        self.null_heldout, self.null_train = null_heldout, null_train
+        self.ho = prep.heldout_mask_samples()
+        self.slow = loc.slow_templates(prep)
+        quiet = loc.noise_mask(prep)
+        self.span_ho = float((self.ho & quiet).sum() * prep.sample_interval_s)
+        self.span_tr = float((~self.ho & quiet).sum() * prep.sample_interval_s)
+
+    def judge(self, rate_res_dps: np.ndarray) -> dict:
+        """The band of a rate residual.
+
+        Parameters
+        ----------
+        rate_res_dps : ndarray
+            Full-rate rate residual (deg/s).
+
+        Returns
+        -------
+        dict
+            ``excess_heldout``, ``z_heldout``, ``excess_train``, ``z_train`` (excess Allan variance, (deg/s)^2, and
+            its z against the null), ``z_flat_heldout``, ``z_rise_heldout`` (:func:`band_shape`), ``raised`` (both
+            bands above their thresholds), ``wander`` (raised, but rising as tau^2), ``allan_heldout``
+            (``(taus, adev)``).
+        """
+        p = self.prep
+        t_ho, a_ho, _ = loc.residual_allan(p, rate_res_dps, self.ho, self.slow)
+        t_tr, a_tr, _ = loc.residual_allan(p, rate_res_dps, ~self.ho, self.slow)
+        ex_ho, z_ho = band_excess(t_ho, a_ho, self.null_heldout, span_s=self.span_ho)
+        ex_tr, z_tr = band_excess(t_tr, a_tr, self.null_train, span_s=self.span_tr)
+        z_flat, z_rise = band_shape(t_ho, a_ho, self.null_heldout, span_s=self.span_ho)
+        raised = bool(z_ho > FLICKER_Z_HELDOUT and z_tr > FLICKER_Z_TRAIN)
+        wander = bool(raised and z_rise > WANDER_Z_RISE and z_rise > WANDER_RISE_OVER_FLAT * z_flat)
+        return {"excess_heldout": ex_ho, "z_heldout": z_ho, "excess_train": ex_tr, "z_train": z_tr,
+                "z_flat_heldout": z_flat, "z_rise_heldout": z_rise, "raised": raised, "wander": wander,
+                "allan_heldout": (t_ho, a_ho)}

@@ -1,10 +1,9 @@
-"""Knobs: named scalar parameters that act on a device, for calibration and attribution.
+"""Knobs on a device: the nominal model's stated uncertainty and the library effects, for calibration and attribution.
 
-A *nominal* knob is a unit-to-unit tolerance of the device (frequencies, Q, quadrature,
-demodulation phase, scale factor, in-phase coupling, amplitude set-point); its value is the
-deviation from the data-sheet device (0 = nominal) and its prior is the tolerance. An *effect*
-knob is a parameter of a library effect (:data:`fmvmg_sim.effects.MODELS`) folded into the device
-through :class:`fmvmg_sim.effects.EffectSet`.
+A *nominal* knob (:mod:`fmvmg_sim.uncertainty`) is something the nominal model does not know exactly: a unit
+value, a temperature law or a channel's offset and gain; its value is the deviation from the device file
+(0 = nominal) and its prior standard deviation is its tolerance. An *effect* knob is a parameter of a library
+effect (:data:`fmvmg_sim.effects.MODELS`) folded into the device through :class:`fmvmg_sim.effects.EffectSet`.
 """
 
 from __future__ import annotations
@@ -12,56 +11,81 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..device import Device
 from ..diagram import design_phase_trim
 from ..effects import MODELS, EffectSet
+from ..uncertainty import BOUND_TOLERANCES, KNOBS, KNOBS_BY_NAME, tolerances
 
 
 @dataclass(frozen=True)
-class Knob:
-    """One nominal-parameter deviation.
+class KnobSet:
+    """The knobs a calibration moves for one device: those of :data:`fmvmg_sim.uncertainty.KNOBS` with a
+    non-zero tolerance, in that order.
 
     Parameters
     ----------
-    name : str
-        Knob name (unit in the name).
-    path : tuple of str
-        Key path into ``Device.values`` (for ``trim``: the demodulator).
-    kind : str
-        ``"rel"``: value * (1 + x); ``"abs"``: value + x; ``"trim_mrad"``: phase trim = designed + x mrad;
-        ``"freq_rel"``: both mode frequencies * (1 + x).
-    tolerance : float
-        Unit-to-unit tolerance (half-width of the uniform spread the case generator draws from; the
-        calibration uses it as the prior standard deviation).
-    step : float
-        Finite-difference step for sensitivities.
+    knobs : tuple of Knob
+    tolerance : ndarray
+        Each knob's tolerance (its prior standard deviation).
     """
 
-    name: str
-    path: tuple
-    kind: str
-    tolerance: float
-    step: float
+    knobs: tuple
+    tolerance: np.ndarray
 
+    @classmethod
+    def of(cls, device: Device) -> "KnobSet":
+        """The knobs of ``device`` (its ``[tolerance]`` table).
 
-#: The nominal parameters the calibration moves (device tolerances, [E] engineering estimates).
-NOMINAL_KNOBS: tuple[Knob, ...] = (
-    Knob("f_modes_rel", ("mechanics",), "freq_rel", 5e-3, 1e-5),
-    Knob("split_Hz", ("mechanics", "f_sense_Hz"), "abs", 10.0, 0.5),
-    Knob("q_drive_rel", ("mechanics", "q_drive"), "rel", 0.2, 0.01),
-    Knob("q_sense_rel", ("mechanics", "q_sense"), "rel", 0.2, 0.01),
-    Knob("quadrature_rel", ("mechanics", "quadrature_rate_dps"), "rel", 0.2, 0.01),
-    Knob("demod_phase_mrad", ("circuit", "demodulator", "phase_trim"), "trim_mrad", 3.0, 0.1),
-    Knob("sense_gain_rel", ("circuit", "sense_amp2", "gain"), "rel", 0.02, 1e-3),
-    Knob("omega_c_dps", ("mechanics", "damping_coupling_rate_dps"), "abs", 0.3, 0.01),
-    Knob("vref_rel", ("circuit", "reference", "vref_V"), "rel", 0.01, 1e-4),
-)
-NOMINAL_NAMES = tuple(k.name for k in NOMINAL_KNOBS)
-#: Calibration bounds in tolerances: a unit is within its tolerance (with this margin for the
-#: linearisation); a fit that needs more is itself evidence of an unmodelled effect, so the nominal
-#: parameters are not allowed to absorb an effect's signature by leaving their tolerance.
-BOUND_TOLERANCES = 1.5
-KNOBS_BY_NAME = {k.name: k for k in NOMINAL_KNOBS}
+        Parameters
+        ----------
+        device : Device
+
+        Returns
+        -------
+        KnobSet
+        """
+        tol = tolerances(device)
+        kept = tuple(k for k in KNOBS if tol[k.name] > 0.0)
+        return cls(kept, np.array([tol[k.name] for k in kept], dtype=float))
+
+    def __len__(self) -> int:
+        return len(self.knobs)
+
+    @property
+    def names(self) -> list:
+        """Knob names, in order."""
+        return [k.name for k in self.knobs]
+
+    def tolerance_of(self, name: str) -> float:
+        """The tolerance of knob ``name``.
+
+        Parameters
+        ----------
+        name : str
+
+        Returns
+        -------
+        float
+        """
+        return float(self.tolerance[self.names.index(name)])
+
+    @property
+    def device_knobs(self) -> tuple:
+        """The knobs that change the device (their sensitivities are response tables)."""
+        return tuple(k for k in self.knobs if k.on_device)
+
+    @property
+    def lo(self) -> np.ndarray:
+        """Lower calibration bounds (a relative knob never takes its value below a tenth)."""
+        return np.array([max(-BOUND_TOLERANCES * t, -0.9) if k.kind in ("rel", "inv_rel", "gain", "freq_rel")
+                         else -BOUND_TOLERANCES * t for k, t in zip(self.knobs, self.tolerance)])
+
+    @property
+    def hi(self) -> np.ndarray:
+        """Upper calibration bounds."""
+        return BOUND_TOLERANCES * self.tolerance
 
 
 def apply_nominal(device: Device, values: dict) -> Device:
@@ -72,7 +96,8 @@ def apply_nominal(device: Device, values: dict) -> Device:
     device : Device
         The data-sheet device (deviations are relative to it).
     values : dict
-        ``{knob name: deviation}``; missing knobs stay nominal.
+        ``{knob name: deviation}``; missing knobs stay nominal, channel knobs are ignored (they act on the
+        recorded channels: :func:`fmvmg_sim.uncertainty.apply_channels`).
 
     Returns
     -------
@@ -83,19 +108,68 @@ def apply_nominal(device: Device, values: dict) -> Device:
     trim = design_phase_trim(device)
     v["circuit"]["demodulator"]["phase_trim"] = trim
     for name, x in values.items():
-        if x == 0.0:
-            continue
         k = KNOBS_BY_NAME[name]
+        if x == 0.0 or not k.on_device:
+            continue
         if k.kind == "freq_rel":
             v["mechanics"]["f_drive_Hz"] *= 1.0 + x
             v["mechanics"]["f_sense_Hz"] *= 1.0 + x
         elif k.kind == "trim_mrad":
             v["circuit"]["demodulator"]["phase_trim"] = trim + 1e-3 * x
         else:
-            d = v
-            for key in k.path[:-1]:
-                d = d[key]
-            d[k.path[-1]] = d[k.path[-1]] * (1.0 + x) if k.kind == "rel" else d[k.path[-1]] + x
+            for path in k.paths:
+                d = v
+                for key in path[:-1]:
+                    d = d[key]
+                v0 = d.get(path[-1], 0.0)  # an optional law (a curvature) is 0 when the device file leaves it out
+                d[path[-1]] = (v0 * (1.0 + x) if k.kind == "rel" else v0 / (1.0 + x) if k.kind == "inv_rel"
+                               else v0 + x)
+    return Device(v, device.path)
+
+
+def knob_values(device: Device, name: str, x: float) -> tuple[float, float]:
+    """A knob's nominal value and its value at deviation ``x``, in the quantity it acts on (a Q, a coefficient in
+    1/K, a channel gain; the demodulation phase error in mrad, the first mode frequency for ``f_modes_rel``).
+
+    Parameters
+    ----------
+    device : Device
+    name : str
+    x : float
+        The knob's deviation.
+
+    Returns
+    -------
+    nominal, calibrated : float
+    """
+    k = KNOBS_BY_NAME[name]
+    if k.kind == "gain":
+        return 1.0, 1.0 + x
+    if k.kind in ("offset", "delay", "trim_mrad"):
+        return 0.0, x
+    if k.kind == "freq_rel":
+        f = float(device.values["mechanics"]["f_drive_Hz"])
+        return f, f * (1.0 + x)
+    d = device.values
+    for key in k.paths[0][:-1]:
+        d = d[key]
+    v = float(d.get(k.paths[0][-1], 0.0))
+    return v, (v * (1.0 + x) if k.kind == "rel" else v / (1.0 + x) if k.kind == "inv_rel" else v + x)
+
+
+def flip_quadrature(device: Device) -> Device:
+    """The device with its quadrature coupling of the other sign (a unit's imbalance has either sign).
+
+    Parameters
+    ----------
+    device : Device
+
+    Returns
+    -------
+    Device
+    """
+    v = copy.deepcopy(device.values)
+    v["mechanics"]["quadrature_rate_dps"] = -v["mechanics"]["quadrature_rate_dps"]
     return Device(v, device.path)
 
 

@@ -26,20 +26,19 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..averaged import scale_factor_V_per_dps
 from ..diagnosis.calibrate import calibrate
 from ..diagnosis.data import prepare
 from ..diagnosis.fitting import PATH_EFFECTS, Fitter
 from ..diagnosis.forward import CHANNELS, IRATE
 from ..diagnosis.likelihood import innovations, slow_state_fit
 from ..diagnosis.model import EffectModel
-from ..diagnosis.parameters import NOMINAL_KNOBS, apply_nominal
-from ..diagram import build_diagram
+from ..diagnosis.parameters import KnobSet, apply_nominal, flip_quadrature
 from ..effects import MODELS, EffectSet, validate_effects
 from ..envelope.engine import run_envelope
 from ..profiles import PiecewiseProfile
 from ..record import atomic_write_text, read_record, write_record
 from ..scenario import load_scenario
+from ..uncertainty import apply_channels
 
 #: Case mix.
 P_NULL, P_SINGLE = 0.20, 0.55
@@ -308,8 +307,13 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
         if rng_ool.random() < mix.p_ool:
             ool = draw_out_of_library(rng_ool, duration_s)
             effects, drawn = [], {}
-    theta = {kn.name: float(rng.uniform(-1, 1) * kn.tolerance) for kn in NOMINAL_KNOBS}
     scn = load_scenario(scenario_path)
+    # a unit and its data acquisition drawn across the nominal model's stated uncertainty: every knob uniformly
+    # within its tolerance (unit values, temperature laws, channel offsets and gains), the quadrature of either sign
+    knobs = KnobSet.of(scn.device_nominal)
+    theta = {n: float(rng.uniform(-1, 1) * t) for n, t in zip(knobs.names, knobs.tolerance)}
+    quad_sign = float(rng.choice([-1.0, 1.0]))
+    unit = flip_quadrature(scn.device_nominal) if quad_sign < 0 else scn.device_nominal
     s = copy.copy(scn)
     s.settings = copy.deepcopy(scn.settings)
     s.settings["scenario"].update(duration_s=duration_s, output_rate_Hz=output_rate_Hz,
@@ -322,11 +326,13 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     (out / "cases").mkdir(parents=True, exist_ok=True)
     (out / "labels").mkdir(parents=True, exist_ok=True)
     path = out / "cases" / f"case_{k:04d}.csv"
+    sf_nominal = scn.device_nominal.nominal_scale_factor_V_per_dps
+    t_ref = scn.device_nominal.reference_temperature_C
 
     def simulate(eff):
-        s.device = EffectSet(eff).apply_to_device(apply_nominal(scn.device_nominal, theta))
+        s.device = EffectSet(eff).apply_to_device(apply_nominal(unit, theta))
         s.effects = eff
-        rec = run_envelope(s, progress=False, log=lambda m: None).to_record()
+        rec = recorded(run_envelope(s, progress=False, log=lambda m: None).to_record(), theta, sf_nominal, t_ref)
         rec.metadata = {"device": scn.device.name, "source": "diagnose-benchmark case"}
         write_record(path, rec)
 
@@ -337,50 +343,89 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     scales, snr_by = {}, {}
     for n in effects:
         if n in NOISE_LEVEL:
-            scales[n], snr_by[n] = _scale_to(path, scenario_path, s.device_nominal, theta, {n: drawn[n]}, target)
+            scales[n], snr_by[n] = _scale_to(path, scenario_path, unit, theta, {n: drawn[n]}, target)
     noise_eff = validate_effects({n: scaled({n: drawn[n]}, scales[n])[n] for n in scales}, "case")
     twin = copy.copy(s)
     twin.settings = copy.deepcopy(s.settings)
     twin.settings["scenario"]["seed"] = int(rng.integers(0, 2 ** 31))
-    twin.device = EffectSet(noise_eff).apply_to_device(apply_nominal(scn.device_nominal, theta))
+    twin.device = EffectSet(noise_eff).apply_to_device(apply_nominal(unit, theta))
     twin.effects = noise_eff
-    noise = noise_model(run_envelope(twin, progress=False, log=lambda m: None).to_record(), s.device_nominal, theta)
+    noise = noise_model(recorded(run_envelope(twin, progress=False, log=lambda m: None).to_record(), theta, sf_nominal,
+                                 t_ref),
+                        unit, theta)
     eff = validate_effects(drawn, "case")
     simulate(eff)
     for n in effects:
         if n not in NOISE_LEVEL:
-            scales[n], snr_by[n] = _scale_to(path, scenario_path, s.device_nominal, theta, {n: drawn[n]}, target,
-                                             noise=noise)
+            scales[n], snr_by[n] = _scale_to(path, scenario_path, unit, theta, {n: drawn[n]}, target, noise=noise)
     if effects and any(v != 1.0 for v in scales.values()):
         eff = validate_effects({n: scaled({n: drawn[n]}, scales[n])[n] for n in effects}, "case")
         simulate(eff)
     if ool is not None:
-        ool = add_out_of_library(path, ool, target, s.device_nominal, noise)
-    label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "amplitude_scale": scales,
+        ool = add_out_of_library(path, ool, target, unit, noise)
+    label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "quadrature_sign": quad_sign,
+             "amplitude_scale": scales,
              "snr_target": target if effects else 0.0, "snr_by_effect": snr_by,
              "sim_seed": s.seed, "temperature_points": tp, "rate_points": rp,
              "noise_model": {c: list(v) for c, v in zip(CHANNELS, noise) if v is not None}}
-    label["snr"] = signature_snr(path, scenario_path, s.device_nominal, theta, eff, noise=noise) if effects else 0.0
+    label["snr"] = signature_snr(path, scenario_path, unit, theta, eff, noise=noise) if effects else 0.0
     # the former definition (white block noise only), kept so that scores can be compared across it
-    white = {n: snr_by[n] if n in NOISE_LEVEL else signature_snr(path, scenario_path, s.device_nominal, theta,
-                                                                  {n: eff[n]}) for n in effects}
+    white = {n: snr_by[n] if n in NOISE_LEVEL else signature_snr(path, scenario_path, unit, theta, {n: eff[n]})
+             for n in effects}
     label["snr_white_by_effect"] = white
     label["tier_white"] = tier(min(white.values())) if effects else "null"
     # a pair is as detectable as its weaker member
     label["tier"] = tier(min(snr_by.values())) if effects else "null"
     # ... and as detectable beside its partner as what the partner cannot explain of it
-    sep = separable_snr(path, s.device_nominal, theta, eff, noise, snr_by) if effects else {}
+    sep = separable_snr(path, unit, theta, eff, noise, snr_by) if effects else {}
     label["snr_separable_by_effect"] = sep
     label["tier_separable"] = tier(min(sep.values())) if effects else "null"
     # ... and as detectable as its training window carries it (a secondary tier: the issue's limit is the
     # whole record's)
-    label["snr_train"] = training_snr(path, s.device_nominal, theta, eff, noise) if effects else 0.0
+    label["snr_train"] = training_snr(path, unit, theta, eff, noise) if effects else 0.0
     label["tier_train"] = tier(label["snr_train"]) if effects else "null"
     if ool is not None:
         label.update(out_of_library=ool, snr_target=target, snr=ool["snr"], tier=tier(ool["snr"]),
                      tier_white=tier(ool["snr"]), tier_separable=tier(ool["snr"]), snr_train=None, tier_train=None)
     atomic_write_text(out / "labels" / f"case_{k:04d}.json", json.dumps(label, indent=1) + "\n")
     return label
+
+
+def recorded(rec, theta: dict, sf_nominal: float, reference_temperature_C: float = 25.0):
+    """A simulated record as the unit's data acquisition writes it: through the channel knobs of ``theta``
+    (:func:`fmvmg_sim.uncertainty.apply_channels`), ``rate_dps`` the rate output over the nominal scale factor.
+
+    Parameters
+    ----------
+    rec : Record
+    theta : dict
+    sf_nominal : float
+    reference_temperature_C : float, optional
+        The device's (the channels' gain coefficients are about it).
+
+    Returns
+    -------
+    Record
+    """
+    cols = apply_channels(theta, {c: np.asarray(v, dtype=float) for c, v in rec.columns.items()},
+                          reference_temperature_C)
+    cols["rate_dps"] = cols["rate_V"] / sf_nominal
+    return type(rec)(cols, rec.metadata, rec.path)
+
+
+def unit_device(label: dict, device_nominal):
+    """The nominal device with the quadrature sign of a case's unit (its label's ``quadrature_sign``).
+
+    Parameters
+    ----------
+    label : dict
+    device_nominal : Device
+
+    Returns
+    -------
+    Device
+    """
+    return flip_quadrature(device_nominal) if label.get("quadrature_sign", 1.0) < 0 else device_nominal
 
 
 def draw_out_of_library(rng: np.random.Generator, duration_s: float) -> dict:
@@ -453,7 +498,7 @@ def add_out_of_library(path: Path, ool: dict, target: float, device_nominal, noi
     """
     rec = read_record(path, warn_unknown=False)
     cols = {c: np.array(v, dtype=float) for c, v in rec.columns.items()}
-    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
+    sf = device_nominal.nominal_scale_factor_V_per_dps
     fit = Fitter(prepare(rec, sf), device_nominal, tables=_CASE_TABLES.get())
     unit = out_of_library_shape(ool, cols["time_s"])
     z = fit.prep.block_mean(out_of_library_shape(ool, fit.prep.t_s) * sf) / fit.S[:, IRATE]
@@ -548,9 +593,10 @@ def noise_model(record, device_nominal, theta: dict) -> list:
         One ``(rho, K, s)`` per channel of :data:`fmvmg_sim.diagnosis.forward.CHANNELS` (None if absent),
         ``s`` floored at 1 (the block sigma).
     """
-    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
+    sf = device_nominal.nominal_scale_factor_V_per_dps
     fit = Fitter(prepare(record, sf), device_nominal, tables=_CASE_TABLES.get())
-    Z = fit.residual(fit.table(theta).evaluate(fit.path(None)["die_b"], fit.rate_b))
+    fit.delay_s = theta.get("temperature_delay_s", 0.0)
+    Z = fit.residual(fit.through_channels(theta, fit.table(theta).evaluate(fit.path(None)["die_b"], fit.rate_b)))
     out = []
     for c in range(Z.shape[1]):
         if np.isfinite(Z[:, c]).sum() > 10:
@@ -570,10 +616,12 @@ def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict, train
     absent), and the nominal knobs calibrated to it on every block (``training``: on the diagnoser's training
     window, the last forward-chained fold's training blocks)."""
     rec = read_record(record_path, warn_unknown=False)
-    sf = scale_factor_V_per_dps(build_diagram(device_nominal, device_nominal.reference_temperature_C))
+    sf = device_nominal.nominal_scale_factor_V_per_dps
     fit = Fitter(prepare(rec, sf), device_nominal, tables=_CASE_TABLES.get())
+    fit.delay_s = theta.get("temperature_delay_s", 0.0)  # the temperature the unit saw
     path = fit.path({n: v for n, v in det.items() if n in PATH_EFFECTS})
-    truth = fit.table(theta, det, quad=True, rate=True).evaluate(path["die_b"], path["rate_b"], path["quad_b"])
+    truth = fit.through_channels(theta, fit.table(theta, det, quad=True, rate=True).evaluate(
+        path["die_b"], path["rate_b"], path["quad_b"]))
     truth[:, ~fit.present] = np.nan
     fit.Y = truth
     rows = fit.prep.folds()[-1]["train"] if training else np.ones(fit.prep.n_blocks, bool)

@@ -53,7 +53,7 @@ from scipy.stats import binomtest
 from ..diagnosis.forward import CHANNELS
 from ..effects import MODELS
 from ..scenario import load_scenario
-from .cases import NOISE_LEVEL, snr_beyond
+from .cases import NOISE_LEVEL, snr_beyond, unit_device
 
 
 def param_errors(effect: str, truth: dict, est: dict) -> list[float]:
@@ -128,8 +128,8 @@ def answer_snr(label: dict, result: dict, scenario: str) -> float | None:
         return None
     noise = [label["noise_model"].get(c) for c in CHANNELS]
     try:
-        return snr_beyond(label["record"], load_scenario(scenario).device_nominal, label["nominal_deviation"],
-                          label["effects"], noise, det)
+        return snr_beyond(label["record"], unit_device(label, load_scenario(scenario).device_nominal),
+                          label["nominal_deviation"], label["effects"], noise, det)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError):
         return None
 

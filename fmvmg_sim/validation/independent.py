@@ -1,0 +1,256 @@
+"""The diagnosis scored on labelled records the project did not make (``fmvmg diagnose-independent``).
+
+A folder of records (``case_XXX.csv`` or ``.csv.gz``, the record format) and their truth (``labels.json``: per case
+``effects`` ``{name: params}``, empty for a null unit, and ``strength`` per effect, ``clear``, ``detectable`` or
+``near_or_below_noise``) is diagnosed against one or more nominal scenarios, each record in its own process; each
+outcome is scored against its label after every diagnosis has returned:
+
+* a null unit is right when the verdict is ``none``;
+* a single effect is right when it is accepted first, or named in the ambiguity set of the accepted effect;
+* a pair is right when the accepted set is the truth;
+* every accepted deterministic effect is checked against the acceptance floor on its held-out shrink
+  (:data:`~fmvmg_sim.diagnosis.criteria.SHRINK_FLOOR`).
+
+:func:`format_table` gives the one table docs/diagnosis_guide.md shows.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from tqdm import tqdm
+
+from ..diagnosis.criteria import SHRINK_FLOOR
+from ..diagnosis.pipeline import N_NULL, diagnose
+from ..diagnosis.report import write_report
+from ..errors import InputError
+from ..record import atomic_write_text
+
+#: Noise-level effects (their report row has no held-out shrink of the deterministic gap).
+NOISE_LEVEL = ("quantization", "flicker_noise")
+
+
+def load_labels(folder: Path) -> dict:
+    """The labels of a folder of independent records, each with its record file.
+
+    Parameters
+    ----------
+    folder : Path
+        Holds ``labels.json`` and the records it names (``<case>.csv`` or ``<case>.csv.gz``).
+
+    Returns
+    -------
+    dict
+        ``{case: label}``, each label with ``record`` (the file) added.
+
+    Raises
+    ------
+    InputError
+        No ``labels.json``, not JSON, a case without ``effects``, or a case whose record is missing.
+    """
+    path = Path(folder) / "labels.json"
+    if not path.is_file():
+        raise InputError("no labels.json (expected {case: {effects: {...}, strength: {...}}})", str(folder))
+    try:
+        labels = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"not JSON ({exc})", str(path)) from None
+    if not isinstance(labels, dict):
+        raise InputError("expected an object of cases", str(path))
+    out = {}
+    for case, lab in labels.items():
+        if not isinstance(lab, dict) or not isinstance(lab.get("effects"), dict):
+            raise InputError("a case without an 'effects' table", f"{path}: {case}")
+        rec = next((Path(folder) / f"{case}{ext}" for ext in (".csv", ".csv.gz")
+                    if (Path(folder) / f"{case}{ext}").is_file()), None)
+        if rec is None:
+            raise InputError(f"no record {case}.csv or {case}.csv.gz beside the labels", f"{path}: {case}")
+        out[case] = dict(lab, record=str(rec))
+    return out
+
+
+def kind(label: dict) -> str:
+    """``"null"``, ``"single"`` or ``"pair"`` (by the number of true effects).
+
+    Parameters
+    ----------
+    label : dict
+
+    Returns
+    -------
+    str
+    """
+    return {0: "null", 1: "single"}.get(len(label["effects"]), "pair")
+
+
+def score_case(label: dict, report: dict) -> dict:
+    """One record's outcome against its label.
+
+    Parameters
+    ----------
+    label : dict
+        ``effects`` and, optionally, ``strength``.
+    report : dict
+        The JSON report, or ``{"error": ...}``.
+
+    Returns
+    -------
+    dict
+        ``truth``, ``strength``, ``kind``, ``verdict``, ``accepted``, ``ambiguous_with``, ``shrink`` (of each
+        accepted deterministic effect), ``right``, ``below_floor`` (accepted effects whose shrink is below the
+        floor), ``rules_fired``, ``error``.
+    """
+    truth = sorted(label["effects"])
+    row = {"truth": truth, "strength": dict(label.get("strength") or {}), "kind": kind(label)}
+    if "error" in report:
+        return dict(row, verdict=None, accepted=[], ambiguous_with={}, shrink={}, right=False, below_floor=[],
+                    rules_fired=[], error=report["error"])
+    acc = list(report["accepted"])
+    amb = report.get("ambiguous_with") or {}
+    rows = {r["effect"]: r for r in report.get("ranked", [])}
+    shrink = {a: rows.get(a, {}).get("shrink") for a in acc if a not in NOISE_LEVEL}
+    if row["kind"] == "null":
+        right = report["verdict"] == "none" and not acc
+    elif row["kind"] == "single":
+        t = truth[0]
+        right = bool(acc[:1] == [t] or (acc and t in amb.get(acc[0], [])))
+    else:
+        right = sorted(acc) == truth
+    below = [a for a, s in shrink.items() if s is None or s < SHRINK_FLOOR]
+    return dict(row, verdict=report["verdict"], accepted=acc, ambiguous_with=amb, shrink=shrink, right=bool(right),
+                below_floor=below, rules_fired=[r["rule"] for r in report.get("rules_fired", [])], error=None)
+
+
+def summary(rows: dict) -> dict:
+    """Rates over the scored records.
+
+    Parameters
+    ----------
+    rows : dict
+        ``{case: score_case(...)}``.
+
+    Returns
+    -------
+    dict
+        ``{group: {"right": k, "cases": n}}`` for ``null``, ``single_clear`` (single effects labelled clear),
+        ``single`` and ``pair``; ``accepted_below_floor`` (accepted effects whose held-out shrink is below the
+        floor, over all records) and ``errors``.
+    """
+    def part(sel):
+        v = [r for r in rows.values() if sel(r)]
+        return {"right": sum(r["right"] for r in v), "cases": len(v)}
+    return {"null": part(lambda r: r["kind"] == "null"),
+            "single_clear": part(lambda r: r["kind"] == "single"
+                                 and all(s == "clear" for s in r["strength"].values()) and r["strength"]),
+            "single": part(lambda r: r["kind"] == "single"),
+            "pair": part(lambda r: r["kind"] == "pair"),
+            "accepted_below_floor": sum(len(r["below_floor"]) for r in rows.values()),
+            "errors": sum(r["error"] is not None for r in rows.values())}
+
+
+def _diagnose_one(args: tuple) -> dict:
+    """Worker: diagnose one record against one scenario and write its report (the label is not read here)."""
+    record, scenario, out_dir, n_null = args
+    warnings.simplefilter("ignore")
+    try:
+        rep = diagnose(record, scenario, n_null=n_null, progress=False, log=lambda m: None)
+    except Exception as exc:  # a failed diagnosis is scored as a failure, not hidden
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    return write_report(rep, Path(out_dir))
+
+
+def run_independent(folder: Path, scenarios: list, out: Path, cases: list | None = None, workers: int = 2,
+                    n_null: int = N_NULL, progress: bool = True) -> dict:
+    """Diagnose every labelled record against every scenario and score the outcomes.
+
+    Parameters
+    ----------
+    folder : Path
+        The records and ``labels.json`` (:func:`load_labels`).
+    scenarios : list of str
+        Nominal scenarios (names or files).
+    out : Path
+        Reports go to ``out/<scenario>/<case>/``; ``scores.json`` and ``table.md`` to ``out``.
+    cases : list of str, optional
+        A subset of the cases (default all).
+    workers : int, optional
+        Processes.
+    n_null : int, optional
+        Null re-simulations per diagnosis.
+    progress : bool, optional
+
+    Returns
+    -------
+    dict
+        ``{"scenarios": {name: {"rows": {case: row}, "summary": {...}}}, "shrink_floor": ...}``.
+    """
+    labels = load_labels(folder)
+    if cases:
+        unknown = [c for c in cases if c not in labels]
+        if unknown:
+            raise InputError(f"no such case(s) {unknown} in labels.json", str(folder))
+        labels = {c: labels[c] for c in cases}
+    jobs = [(labels[c]["record"], str(s), str(Path(out) / Path(str(s)).stem / c), n_null)
+            for s in scenarios for c in labels]
+    with ProcessPoolExecutor(max_workers=max(1, workers)) as ex:
+        reports = list(tqdm(ex.map(_diagnose_one, jobs), total=len(jobs), disable=not progress, file=sys.stderr,
+                            desc="independent records"))
+    result = {"folder": str(folder), "shrink_floor": SHRINK_FLOOR, "scenarios": {}}
+    it = iter(reports)
+    for s in scenarios:
+        rows = {c: score_case(labels[c], next(it)) for c in labels}
+        result["scenarios"][Path(str(s)).stem] = {"rows": rows, "summary": summary(rows)}
+    atomic_write_text(Path(out) / "scores.json", json.dumps(result, indent=1, default=float) + "\n")
+    atomic_write_text(Path(out) / "table.md", format_table(result))
+    return result
+
+
+def _fmt_acc(row: dict) -> str:
+    if row["error"]:
+        return f"error: {row['error']}"
+    parts = []
+    for a in row["accepted"]:
+        s = row["shrink"].get(a)
+        amb = row["ambiguous_with"].get(a)
+        parts.append(a + (f" ({s:.2f})" if s is not None else "") + (f" ~ {', '.join(amb)}" if amb else ""))
+    return "; ".join(parts) or "-"
+
+
+def format_table(result: dict) -> str:
+    """The Markdown table of a run: one row per record, per scenario its verdict, accepted effects (held-out
+    shrink, look-alikes) and whether it is right, then the rates.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`run_independent`.
+
+    Returns
+    -------
+    str
+    """
+    names = list(result["scenarios"])
+    cases = list(next(iter(result["scenarios"].values()))["rows"]) if names else []
+    head = "| record | truth (strength) | " + " | ".join(f"{n}: verdict | accepted (shrink) ~ look-alikes | right"
+                                                          for n in names) + " |"
+    L = [head, "|" + "---|" * (2 + 3 * len(names))]
+    for c in cases:
+        r0 = result["scenarios"][names[0]]["rows"][c]
+        truth = ", ".join(f"{t} ({r0['strength'].get(t, '?')})" for t in r0["truth"]) or "none (null unit)"
+        cells = []
+        for n in names:
+            r = result["scenarios"][n]["rows"][c]
+            cells += [r["verdict"] or "-", _fmt_acc(r), "yes" if r["right"] else "**no**"]
+        L.append(f"| {c} | {truth} | " + " | ".join(cells) + " |")
+    L += ["", "| scenario | null units 'none' | clear single effect found | all single effects found | pairs exact "
+          f"| accepted with shrink below {result['shrink_floor']:g} | errors |", "|---|---|---|---|---|---|---|"]
+    for n in names:
+        s = result["scenarios"][n]["summary"]
+        f = lambda d: f"{d['right']} / {d['cases']}"  # noqa: E731
+        L.append(f"| {n} | {f(s['null'])} | {f(s['single_clear'])} | {f(s['single'])} | {f(s['pair'])} | "
+                 f"{s['accepted_below_floor']} | {s['errors']} |")
+    return "\n".join(L) + "\n"
