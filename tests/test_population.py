@@ -36,6 +36,7 @@ segments = [ { hold_s = 200.0 }, { ramp_to_C = 35.0, rate_C_per_min = 10.0 }, { 
 start_dps = 0.0
 """
 N = 8
+pytestmark = pytest.mark.xdist_group("population")  # one worker shares the module's cluster and population
 
 
 def _figures(pop):
@@ -109,7 +110,7 @@ def test_figures_follow_the_device(population):
 def test_the_dominant_tolerance_is_named(short_path, client):
     # the demodulation phase error (times the ~200 deg/s quadrature) dominates the bias when its tolerance is large
     scn = load_scenario(short_path, ["device.tolerance.demod_phase_mrad=100"])
-    pop = run_population(scn, 12, seed=2, client=client, progress=False)
+    pop = run_population(scn, 10, seed=2, client=client, progress=False)
     bias = pop.figure("bias_25C_dps")
     pop.spec = Spec("bias", {"bias_25C_dps": {"max_abs": float(np.median(np.abs(bias)))}})
     top = pop.drivers()[0]
@@ -165,7 +166,7 @@ def test_cli_writes_the_folder_whole(tmp_path, short_path, capsys, monkeypatch):
 
 
 def test_a_dead_workers_units_rerun(short_path, population):
-    # two worker processes; the first time a worker is busy with a unit, it is killed (SIGKILL): the scheduler
+    # two worker processes; four units; the first time a worker is busy with a unit, it is killed (SIGKILL): the scheduler
     # reruns its unit elsewhere and the population comes back whole and the same as on an undisturbed cluster
     from dask.distributed import Client, LocalCluster
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
@@ -181,10 +182,10 @@ def test_a_dead_workers_units_rerun(short_path, population):
             killed.append(client.processing()[busy[0]])
             os.kill(pid, signal.SIGKILL)
     try:
-        pop = run_population(load_scenario(short_path), N, seed=5, client=cl, progress=False,
+        pop = run_population(load_scenario(short_path), 4, seed=5, client=cl, progress=False,
                              on_result=kill_a_busy_worker)
     finally:
         cl.close()
         cluster.close()
     assert killed and killed[0]
-    np.testing.assert_array_equal(_figures(pop), _figures(population))
+    np.testing.assert_array_equal(_figures(pop), _figures(population)[:4])  # a unit is the same in any population

@@ -40,7 +40,9 @@ def plot_histograms(pop: PopulationResult, path: str | Path) -> None:
                     ax.axvline(x, color="tab:red", ls=style, lw=1.5)
         if lim and ok.size:
             fail = len(v) - int(pop.spec.pass_table([{name: x} for x in v]).sum())
-            ax.set_title(f"{name}\n{fail} of {len(v)} outside", fontsize=9)
+            unread = len(v) - ok.size
+            ax.set_title(f"{name}\n{fail - unread} of {len(v)} outside" + (f", {unread} not read" if unread else ""),
+                         fontsize=9)
         else:
             ax.set_title(name, fontsize=9)
         ax.set_ylabel("units")

@@ -1,7 +1,6 @@
 """A population study on Dask: N units drawn from the tolerances, each run over the scenario, then judged.
 
-Each unit is one Dask task keyed by the population's seed and the unit's index (``pure``: the same key is
-the same unit), submitted with retries; a worker that dies mid-unit has its units rerun by the scheduler on
+Each unit is one Dask task keyed by the population's seed and the unit's index, submitted with retries; a worker that dies mid-unit has its units rerun by the scheduler on
 another worker, so no unit is lost. Results come back as small dicts of figures (not records), in any order,
 and are put back in unit order, so the study is the same for a seed whatever the cluster.
 """
@@ -12,6 +11,7 @@ import contextlib
 import os
 import sys
 import time
+import uuid
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -268,9 +268,11 @@ def run_population(scn: Scenario, n_units: int, seed: int = 0, spec: Spec | None
     show = sys.stderr.isatty() if progress is None else progress
     t0 = time.perf_counter()
     with dask_client(client, scheduler, n_workers, processes) as (cl, where):
-        token = tokenize(scn.name, scn.settings, scn.device_nominal.values, scn.effects, knobs, seed)
+        # the unit's key names its seed and index; a token of this call keeps two studies on one cluster (or a
+        # study repeated before the scheduler forgot the last) apart
+        token = tokenize(scn.name, scn.settings, scn.device_nominal.values, knobs, seed, uuid.uuid4().hex)[:12]
         scn_f = cl.scatter(scn, broadcast=True)
-        futures = [cl.submit(run_unit, scn_f, knobs, seed, i, key=f"fmvmg-unit-{token}-{i}",
+        futures = [cl.submit(run_unit, scn_f, knobs, seed, i, key=f"fmvmg-unit-s{seed}-u{i}-{token}",
                              pure=True, retries=RETRIES) for i in range(n_units)]
         units = [None] * n_units
         try:
