@@ -271,7 +271,7 @@ def run_population(scn: Scenario, n_units: int, seed: int = 0, spec: Spec | None
         # the unit's key names its seed and index; a token of this call keeps two studies on one cluster (or a
         # study repeated before the scheduler forgot the last) apart
         token = tokenize(scn.name, scn.settings, scn.device_nominal.values, knobs, seed, uuid.uuid4().hex)[:12]
-        scn_f = cl.scatter(scn, broadcast=True)
+        scn_f = cl.scatter(scn, broadcast=True, hash=False)  # its own key: not freed by an earlier study's release
         futures = [cl.submit(run_unit, scn_f, knobs, seed, i, key=f"fmvmg-unit-s{seed}-u{i}-{token}",
                              pure=True, retries=RETRIES) for i in range(n_units)]
         units = [None] * n_units
