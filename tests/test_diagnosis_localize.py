@@ -1,7 +1,7 @@
-import pytest
 """Localisation statistics against a few null replicates: Holm correction and the sampling-spread floors."""
 
 import numpy as np
+import pytest
 
 from fmvmg_sim.diagnosis import localize as loc
 from tests.test_diagnosis_helpers import NOMINAL

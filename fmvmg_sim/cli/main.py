@@ -26,6 +26,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "diagnose": ("diagnose", "sim-to-real gap diagnosis of a record"),
     "diagnose-benchmark": ("diagnose_benchmark", "score the diagnosis on labelled simulated cases"),
     "diagnose-independent": ("diagnose_independent", "score the diagnosis on labelled records made elsewhere"),
+    "population": ("population", "population study: yield over the device's tolerances"),
     "import-bmi270": ("import_bmi270", "convert a BMI270 serial log into a record"),
 }
 
