@@ -1,4 +1,4 @@
-"""Temperature-drift compensators that act on records (CONTRACTS.md section 3).
+"""Temperature-drift compensators that act on records (docs/formats.md section 3).
 
 Every method is an estimator with scikit-learn's contract (``fit(record)``,
 ``transform(record)`` giving the compensated record, ``get_params``; ``NotFittedError`` before

@@ -5,7 +5,7 @@ slow, a block mean keeps all their information, and 13 h become ~5000 rows. The 
 (die-temperature path, applied rate) are computed at the full rate and block-averaged the same way.
 
 Each record sample is an integrate-and-dump mean over the interval that ends at its time stamp
-(CONTRACTS.md section 2, both engines), so the model is evaluated at interval centres.
+(docs/formats.md section 2, both engines), so the model is evaluated at interval centres.
 
 A channel whose samples sit on a lattice (a converter coarser than its noise) carries the
 quantiser's staircase into every block mean; that is a floor on the block sigma

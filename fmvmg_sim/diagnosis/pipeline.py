@@ -9,7 +9,7 @@
    (:func:`.attribution.attribute`, :mod:`.rules`).
 6. **Noise-level effects**: a coarser converter and extra flicker (:mod:`.noise_effects`).
 7. **Verdict** (:func:`.rules.verdict`) and what the record could not have shown (:mod:`.detection`).
-8. **Report** (:func:`.report.assemble`): CONTRACTS.md section 4 and more; :mod:`.report` writes it as JSON and
+8. **Report** (:func:`.report.assemble`): docs/formats.md section 4 and more; :mod:`.report` writes it as JSON and
    Markdown, :mod:`.plots` draws the figures.
 """
 
@@ -60,7 +60,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     Parameters
     ----------
     record_path : path-like
-        Record (CONTRACTS.md section 2), CSV or gzipped CSV.
+        Record (docs/formats.md section 2), CSV or gzipped CSV.
     scenario_path : path-like
         Nominal scenario: device, circuit, noise and tolerances (time, temperature and rate come from the record).
     n_null : int, optional
@@ -75,7 +75,7 @@ def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, pr
     Returns
     -------
     dict
-        The report (CONTRACTS.md section 4 and more); private arrays for the plots under ``"_plot"``.
+        The report (docs/formats.md section 4 and more); private arrays for the plots under ``"_plot"``.
 
     Raises
     ------

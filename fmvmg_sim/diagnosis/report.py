@@ -1,4 +1,4 @@
-"""The diagnosis report: assembled from the stages' results (:func:`assemble`), written as JSON (CONTRACTS.md
+"""The diagnosis report: assembled from the stages' results (:func:`assemble`), written as JSON (docs/formats.md
 section 4) and Markdown (:func:`write_report`)."""
 
 from __future__ import annotations
@@ -420,7 +420,7 @@ def _shrinks(before: dict, after: dict) -> dict:
 
 
 def effect_row(ev: Evaluation, scorer, cal) -> dict:
-    """One candidate's row of the ranking (CONTRACTS.md section 4 keys, and the evaluation's statistics).
+    """One candidate's row of the ranking (docs/formats.md section 4 keys, and the evaluation's statistics).
 
     Parameters
     ----------
@@ -509,7 +509,7 @@ def assemble(*, record_path, prep, fitter, cal, null, where, scorer, att, quant,
     Returns
     -------
     dict
-        CONTRACTS.md section 4 (``verdict``, ``accepted``, ``ambiguous_with``, ``ranked``, ``localization``) and the
+        docs/formats.md section 4 (``verdict``, ``accepted``, ``ambiguous_with``, ``ranked``, ``localization``) and the
         rest this page's Markdown shows; private arrays for the plots under ``_plot``.
     """
     before = scorer.gaps(scorer.nominal["heldout"])

@@ -378,7 +378,7 @@ def decide(att: Attribution, cands: Candidates, rules: tuple = RULES) -> Attribu
 
 @dataclass(frozen=True)
 class Verdict:
-    """The verdict of CONTRACTS.md section 4 and the rule that gave it.
+    """The verdict of docs/formats.md section 4 and the rule that gave it.
 
     Attributes
     ----------
