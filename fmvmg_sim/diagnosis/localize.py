@@ -12,7 +12,6 @@ length slid along the replicates (on their independent windows' degrees of freed
 
 from __future__ import annotations
 
-import copy
 import sys
 
 import numpy as np
@@ -95,16 +94,10 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
     out = []
     bar = tqdm(devices, disable=not progress, file=sys.stderr, desc="null re-simulation", unit="run")
     for k, device in enumerate(bar):
-        s = copy.copy(scn)
-        s.settings = copy.deepcopy(scn.settings)
-        s.settings["scenario"].update(duration_s=float(prep.t_s[-1]), output_rate_Hz=1.0 / dt, seed=int(seed + k),
-                                      fidelity="envelope")
-        s.settings["initial"]["state"] = "steady"
-        s.device = device
-        s.device_nominal = scn.device_nominal
-        s.effects = {}
-        s.temperature = PiecewiseProfile(tp, Tp, [])
-        s.rate = PiecewiseProfile(tp, rp, [])
+        s = scn.replace(scenario={"duration_s": float(prep.t_s[-1]), "output_rate_Hz": 1.0 / dt,
+                                  "seed": int(seed + k), "fidelity": "envelope"},
+                        initial={"state": "steady"}, device=device, effects={},
+                        temperature=PiecewiseProfile(tp, Tp, []), rate=PiecewiseProfile(tp, rp, []))
         res = run_envelope(s, progress=False, log=lambda m: None)
         i = np.clip(idx, 0, len(res.time_s) - 1)
         x = {c: np.asarray(res[c])[i] for c in CHANNELS}

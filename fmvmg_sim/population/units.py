@@ -9,7 +9,6 @@ and whatever the population size.
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 
@@ -83,6 +82,4 @@ def unit_scenario(scn: Scenario, values: dict, noise_seed: int) -> Scenario:
     from ..effects import EffectSet
     nominal = apply_nominal(scn.device_nominal, values)
     device = EffectSet(scn.effects).apply_to_device(nominal) if scn.effects else nominal
-    settings = {k: dict(v) for k, v in scn.settings.items()}
-    settings["scenario"]["seed"] = int(noise_seed)
-    return dataclasses.replace(scn, settings=settings, device=device, device_nominal=nominal)
+    return scn.replace(scenario={"seed": int(noise_seed)}, device=device, device_nominal=nominal)
