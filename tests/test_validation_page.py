@@ -9,7 +9,7 @@ from fmvmg_sim.validation import page
 
 def test_a_section_is_measured_and_written_with_its_numbers(tmp_path):
     out = tmp_path / "v" / "validation.md"
-    assert page.main(["--only", "allan", "-o", str(out)]) == 0
+    assert page.main(["--only", "allan", "-o", str(out), "--json", str(out.with_suffix(".json"))]) == 0
     md = out.read_text()
     assert md.startswith("# Validation") and "## Allan analysis against Stable32 and NIST" in md
     data = json.loads(out.with_suffix(".json").read_text())

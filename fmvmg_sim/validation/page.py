@@ -5,7 +5,7 @@ Run from a source checkout (the reference data live under ``tests/data``)::
     python -m fmvmg_sim.validation.page -o docs/validation.md
 
 Each section is a function that measures one claim and returns its markdown and its numbers; the page
-(``validation.md``) and the numbers (``validation.json``) are written whole or not at all. ``--only`` runs
+is written whole or not at all, and ``--json PATH`` writes its numbers too (not kept in the repository). ``--only`` runs
 some sections and writes them to another file (a partial page is never mistaken for the whole one), and
 ``--quick`` shortens every measurement to check the machinery (its figures are not the page's).
 """
@@ -50,7 +50,7 @@ class Section:
     lines : list of str
         Its markdown, without the title.
     data : dict
-        Its numbers, as written to ``validation.json``.
+        Its numbers, as written by ``--json``.
     """
 
     title: str
@@ -343,7 +343,8 @@ def main(argv: list[str] | None = None) -> int:
         Exit code.
     """
     ap = argparse.ArgumentParser(prog="python -m fmvmg_sim.validation.page", description=__doc__.splitlines()[0])
-    ap.add_argument("-o", "--out", default="docs/validation.md", help="page to write (its numbers go beside it, .json)")
+    ap.add_argument("-o", "--out", default="docs/validation.md", help="page to write")
+    ap.add_argument("--json", default=None, metavar="PATH", help="also write the page's numbers to this JSON file")
     ap.add_argument("--only", default=None, help="comma-separated sections: " + ", ".join(k for k, _ in SECTIONS))
     ap.add_argument("--quick", action="store_true", help="shortened measurements (checks the machinery)")
     a = ap.parse_args(argv)
@@ -363,7 +364,8 @@ def main(argv: list[str] | None = None) -> int:
         print("--only and --quick write a partial page: give another -o", file=sys.stderr)
         return 2
     md, data = build_page(keys, a.quick, log=lambda m: print(m, file=sys.stderr))
-    atomic_write_text(out.with_suffix(".json"), json.dumps(strict(data), indent=1) + "\n")
+    if a.json:
+        atomic_write_text(Path(a.json), json.dumps(strict(data), indent=1) + "\n")
     atomic_write_text(out, md)
     return 0
 
