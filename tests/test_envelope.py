@@ -102,6 +102,33 @@ def test_noise_covariance_matches_lyapunov():
     assert np.allclose(solve_discrete_lyapunov(Phi, Qd), solve_continuous_lyapunov(A, -Qc), atol=1e-12)
 
 
+def test_noise_covariance_of_a_long_step_on_a_stiff_system():
+    """A step a thousand times the fastest time constant (where one Van Loan exponential overflows): the
+    covariance is still the stationary one minus what the step's transition carries over, to 1e-10."""
+    from scipy.linalg import expm, solve_continuous_lyapunov
+    A = np.array([[-1.0, 3.0, 0.0], [0.0, -50.0, 100.0], [0.0, 0.0, -5000.0]])
+    G = np.array([[0.3, 0.0], [1.0, -0.5], [0.2, 2.0]])
+    Qc = np.diag([1.0, 2.0])
+    P = solve_continuous_lyapunov(A, -G @ Qc @ G.T)
+    for h in (1e-4, 0.01, 0.2):
+        Phi = expm(A * h)
+        ref = P - Phi @ P @ Phi.T
+        assert np.max(np.abs(noise_covariance(A, G, Qc, h) - ref)) < 1e-10 * np.max(np.abs(ref))
+
+
+def test_envelope_steps_up_to_the_longest_allowed_give_the_same_noise():
+    """The population study's long steps: 0.1 s steps run (the step's noise covariance stays positive
+    definite) and give the rate output's short-term noise of 0.01 s steps, flicker included."""
+    from fmvmg_sim.api import simulate
+    sigma = []
+    for h in (0.01, 0.1):
+        res = simulate("static_25C", ["scenario.output_rate_Hz=1", "scenario.duration_s=4000",
+                                      f"scenario.envelope_step_s={h}"], fidelity="envelope")
+        x = np.asarray(res["rate_dps"])[100:]
+        sigma.append(np.std(np.diff(x)) / np.sqrt(2))
+    assert sigma[1] == pytest.approx(sigma[0], rel=0.05)
+
+
 def test_noise_factor_reproduces_badly_scaled_covariances():
     """States in metres and volts side by side; a state the noise cannot reach gets no noise."""
     from fmvmg_sim.numerics.discretize import noise_factor

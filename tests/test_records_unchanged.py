@@ -58,15 +58,15 @@ EFFECTS_TEMPERATURE = ("start_C = 20.0\nsegments = [ { hold_s = 0.01 }, { ramp_t
 
 SHA256 = {
     ("nominal_a", "carrier"): "f7e8ed1d1d959812e4dcec044e3303b9ca7f82c066af88a80b7c64d38f1864d3",
-    ("nominal_a", "envelope"): "04bdfae94cb47fbbb5e6527e4599179851d5bbf6c11c3f5810d441c4735495a9",
+    ("nominal_a", "envelope"): "068754c5212b04c15be0bd2e3aaf9fe5bffe5a6dbd1b55c1316053257f2cf669",
     ("nominal_a_stable_electronics", "carrier"): "eb49e50ec9e43bcf62f2a25b8b18ac07edcb59cfac81088b4b8b7d2eaf2bccb3",
-    ("nominal_a_stable_electronics", "envelope"): "5f2049f7aede9a2c4509a0764281c4062dd3a721600d8363026304b62c8a9c2b",
+    ("nominal_a_stable_electronics", "envelope"): "76fac29a6bade3494873640dcfc098440ce7990e90889d55f1adfe4dc8dab9a4",
     ("oven_000", "carrier"): "ff0b72547ab22d1d128606c62d8023ecdbcdb1eedf35601f38ba7eed34da0db5",
     ("oven_000", "envelope"): "de962f4c7c57b2a4829e7c968824467627546b5f1e68202456f15eb974957f93",
     ("oven_004", "carrier"): "8d4b0e71804f274e4cab388c2596c98b787ccffcb594b1c12392f1691ec3efb4",
     ("oven_004", "envelope"): "e4bd826bef80114b5e03646f4be7f574b296122d8c67a46ab343df41808ff7cf",
     ("population_oven", "carrier"): "210f56b2a8f06501171dc3e801be76778f88c2b263eb6285e7414856d5cd1bcc",
-    ("population_oven", "envelope"): "5114f50f9ae7d63c4dc132c0d73537790a85aabc9a6cc2454b4ed6d1abe056a5",
+    ("population_oven", "envelope"): "9c88e8b3b5b6008225d95b1416c5846734a5425f5b39a1ab62273d20eadd1900",
     ("rate_steps", "carrier"): "67fa94a9178f82356837eccf9ee176d522c97b5484bd5c6da013f4787275391a",
     ("rate_steps", "envelope"): "6684a76835fe7aa3befaa3f727e5532a464763a36f63ff25b1798b6dee3b295a",
     ("rate_table", "carrier"): "91c790cd322ecea849a052211bd74f7581ab33d5b1ce9124139ec39c52efc669",

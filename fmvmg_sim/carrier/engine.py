@@ -88,7 +88,7 @@ class _Unit:
         self.rng = rng = np.random.default_rng(scn.seed)
         nz = scn.noise
         # slow noises, the phase flicker at the output rate
-        self.slow = draw_slow_noises(scn, rng, n, dt_out, n, 1.0 / dt_out)
+        self.slow = draw_slow_noises(scn, rng, n, dt_out)
         self.noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
         self.any_noise = nz["brownian"] or nz["electronic"]
         self.scale = ref.core_state_scale()
