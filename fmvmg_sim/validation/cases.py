@@ -17,7 +17,6 @@ no library effect makes (:data:`OUT_OF_LIBRARY`), added to the rate output; the 
 
 from __future__ import annotations
 
-import copy
 import json
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -314,15 +313,13 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     theta = {n: float(rng.uniform(-1, 1) * t) for n, t in zip(knobs.names, knobs.tolerance)}
     quad_sign = float(rng.choice([-1.0, 1.0]))
     unit = flip_quadrature(scn.device_nominal) if quad_sign < 0 else scn.device_nominal
-    s = copy.copy(scn)
-    s.settings = copy.deepcopy(scn.settings)
-    s.settings["scenario"].update(duration_s=duration_s, output_rate_Hz=output_rate_Hz,
-                                  seed=int(rng.integers(0, 2 ** 31)), fidelity="envelope")
-    s.settings["initial"]["state"] = "steady"
+    sim_seed = int(rng.integers(0, 2 ** 31))
     tp, rp = random_profile(rng, duration_s)
-    s.temperature = PiecewiseProfile(np.array([p[0] for p in tp]), np.array([p[1] for p in tp]), [])
-    s.rate = PiecewiseProfile(np.array([p[0] for p in rp]), np.array([p[1] for p in rp]), [])
-    s.device_nominal = scn.device_nominal
+    s = scn.replace(scenario=dict(duration_s=duration_s, output_rate_Hz=output_rate_Hz, seed=sim_seed,
+                                  fidelity="envelope"),
+                    initial={"state": "steady"},
+                    temperature=PiecewiseProfile(np.array([p[0] for p in tp]), np.array([p[1] for p in tp]), []),
+                    rate=PiecewiseProfile(np.array([p[0] for p in rp]), np.array([p[1] for p in rp]), []))
     (out / "cases").mkdir(parents=True, exist_ok=True)
     (out / "labels").mkdir(parents=True, exist_ok=True)
     path = out / "cases" / f"case_{k:04d}.csv"
@@ -330,9 +327,8 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     t_ref = scn.device_nominal.reference_temperature_C
 
     def simulate(eff):
-        s.device = EffectSet(eff).apply_to_device(apply_nominal(unit, theta))
-        s.effects = eff
-        rec = recorded(run_envelope(s, progress=False, log=lambda m: None).to_record(), theta, sf_nominal, t_ref)
+        sim = s.replace(device=EffectSet(eff).apply_to_device(apply_nominal(unit, theta)), effects=eff)
+        rec = recorded(run_envelope(sim, progress=False, log=lambda m: None).to_record(), theta, sf_nominal, t_ref)
         rec.metadata = {"device": scn.device.name, "source": "diagnose-benchmark case"}
         write_record(path, rec)
 
@@ -345,11 +341,8 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
         if n in NOISE_LEVEL:
             scales[n], snr_by[n] = _scale_to(path, scenario_path, unit, theta, {n: drawn[n]}, target)
     noise_eff = validate_effects({n: scaled({n: drawn[n]}, scales[n])[n] for n in scales}, "case")
-    twin = copy.copy(s)
-    twin.settings = copy.deepcopy(s.settings)
-    twin.settings["scenario"]["seed"] = int(rng.integers(0, 2 ** 31))
-    twin.device = EffectSet(noise_eff).apply_to_device(apply_nominal(unit, theta))
-    twin.effects = noise_eff
+    twin = s.replace(scenario={"seed": int(rng.integers(0, 2 ** 31))},
+                     device=EffectSet(noise_eff).apply_to_device(apply_nominal(unit, theta)), effects=noise_eff)
     noise = noise_model(recorded(run_envelope(twin, progress=False, log=lambda m: None).to_record(), theta, sf_nominal,
                                  t_ref),
                         unit, theta)
