@@ -67,7 +67,7 @@ def test_separable_snr_is_what_the_partner_cannot_explain(twin):
     assert snr_beyond(rec, dev, THETA, q, noise, ["temperature_rate", "quantization"]) > 0.95 * own_q
     distinct = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}, "quadrature_drift": {"beta_per_K": 1e-2}}
     own = {n: signature_snr(rec, NOMINAL, dev, THETA, {n: v}, noise=noise) for n, v in distinct.items()}
-    assert min(own.values()) > 50
+    assert min(own.values()) > 40, own  # both far above the detection limit
     sep = separable_snr(rec, dev, THETA, distinct, noise, own)
     assert abs(sep["temperature_rate"] / own["temperature_rate"] - 1) < 0.05, (own, sep)
     with_noise = {"temperature_rate": {"g_dph_per_K_per_min": 600.0}, "quantization": {"lsb_V": 0.005}}
