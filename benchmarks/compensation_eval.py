@@ -9,8 +9,9 @@ Usage::
 vmd-wflp-cssvr; ``emd``: emd-rbf, emd-rbf-ga, emd-rbf-ga-kf; ``vmd-native``: vmd-wflp-cssvr
 without decimation, the measured effect of the 100 Hz fix) and pickles the
 :class:`~fmvmg_sim.validation.compensation_eval.Evaluation` to ``OUTDIR/GROUP.pkl``; ``merge`` combines
-the groups found into ``DOCSDIR/compensation_eval.{md,json}``, the plots and the generated
-blocks of ``DOCSDIR/compensation_results.md``. Groups run one
+the groups found into ``DOCSDIR/compensation_eval.md``, the plots and the generated
+blocks of ``DOCSDIR/compensation_results.md`` (every run, with what each method chose, into
+``OUTDIR/compensation_eval.json``). Groups run one
 after the other (the machine has 2 shared cores).
 
 Budgets reduced for time (the settings are recorded in the JSON): the CS-SVR search of
@@ -88,7 +89,7 @@ def main(argv=None) -> int:
     ev.config["methods"] = order
     docs.mkdir(parents=True, exist_ok=True)
     (docs / "compensation_eval.md").write_text(E.markdown_table(ev))
-    (docs / "compensation_eval.json").write_text(json.dumps(ev.to_dict(), indent=1))
+    (out / "compensation_eval.json").write_text(json.dumps(ev.to_dict(), indent=1))  # every run, beside the runs
     E.plot_allan(ev, docs / "compensation_allan.png")
     E.plot_traces(ev, docs / "compensation_traces.png")
     E.plot_summary(ev, docs / "compensation_summary.png")
