@@ -204,4 +204,43 @@ def build_sense_loop(circuit: dict) -> SenseLoop | None:
     )
 
 
-__all__ = ["TOPOLOGIES", "SenseLoop", "build_sense_loop"]
+def design_gains(dg, bandwidth_Hz: float = 50.0, zeta: float = 0.7) -> dict:
+    """Rate-loop gains by pole placement on the demodulated sense mode (the demodulation low-pass left out).
+
+    In phase, the sense mode seen through the demodulator is ``P0 (s_0^2) / ((s + sigma)^2 + dw^2)``,
+    ``dw`` the mode split, ``sigma`` its decay rate and ``P0`` the loop's static gain (demodulated volts
+    per volt of effort). With ``C = Kp + Ki/s + Kd s`` the closed loop's characteristic polynomial is
+    placed at ``(s + p)(s^2 + 2 zeta dw s + dw^2)``: the integral pole ``p = 2 pi bandwidth_Hz`` and the
+    split's resonance damped to ``zeta``.
+
+    Parameters
+    ----------
+    dg : fmvmg_sim.diagram.Diagram
+        A diagram with a closed rate loop.
+    bandwidth_Hz : float, optional
+        The integral pole (Hz).
+    zeta : float, optional
+        Damping of the split's resonance.
+
+    Returns
+    -------
+    dict
+        ``kp``, ``ki_per_s``, ``kd_s``.
+    """
+    from .averaged import carrier_phasors, steady_state  # the averaged model imports this module's users
+    ss = steady_state(dg)
+    w, A = ss.omega_rad_s, ss.amplitude_m
+    Hx, Hps = dg.drive_chain_response(w), dg.phase_shifter_response(w)
+    C0, _, _ = carrier_phasors(dg, Hx * A, Hx * Hps * A)
+    loop = dg.sense_loop
+    P0 = abs(dg.demodulator.baseband(loop.sense_transfer(dg, w) * loop.force_per_V(C0), ss.R_I))
+    r = dg.resonator
+    sigma = r.c_sense_N_s_per_m / (2 * r.m_sense_kg)
+    dw = abs(np.sqrt(r.k_sense_N_per_m / r.m_sense_kg) - w)
+    s0 = sigma ** 2 + dw ** 2
+    p = 2 * np.pi * bandwidth_Hz
+    return dict(kp=float(2 * zeta * dw * p / (P0 * s0)), ki_per_s=float(p * dw ** 2 / (P0 * s0)),
+                kd_s=float(max(0.0, p + 2 * zeta * dw - 2 * sigma) / (P0 * s0)))
+
+
+__all__ = ["TOPOLOGIES", "SenseLoop", "build_sense_loop", "design_gains"]

@@ -183,6 +183,10 @@ def loop_initial_state(plan: OperatingPlan, drive_displacement_m: float = 10e-9,
         k_out = _dc_gain(b["Phi_out"], b["Gam_out"])
         u = plan.steady.rate_V / k_out if b["ftr"] else 0.0
         v = plan.steady.quadrature_V / k_out if b["qc"] else 0.0
+    if from_steady:  # the sense mode as the loops hold it (the core's first states are the resonator's x, x', y, y')
+        ss = plan.steady
+        x[STATE.slices["z"].start + 2] = ss.Y.real / plan.scale[2]
+        x[STATE.slices["z"].start + 3] = (1j * ss.omega_rad_s * ss.Y).real / plan.scale[3]
     ci = _hold(b["C_ci"], u)
     cq = _hold(b["C_cq"], v)
     n, vx, vps = (float(x[STATE.slices[name].start]) for name in ("n", "vx", "vps"))
