@@ -1,5 +1,7 @@
 """Closed-loop sense: force-to-rebalance and quadrature control, in the averaged model and both engines."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -12,12 +14,13 @@ from fmvmg_sim.envelope.engine import run_envelope
 from fmvmg_sim.errors import InputError
 from fmvmg_sim.rebalance import design_gains
 from fmvmg_sim.scenario import load_scenario
+from tests.conftest import REPO
+from fmvmg_sim.tuning.rebalance import STEP_DPS, check_rate_step, robust_table, step_metrics, step_scenario
 
 FTR = {"circuit": {"sense": {"topology": "force-rebalance"}, "quadrature_control": {"enabled": True}}}
 QC = {"circuit": {"quadrature_control": {"enabled": True}}}
-STEP_DPS = 50.0
-#: Rate step at this time (s) of each cross-check run; the outputs are compared after the loops settle.
-T_STEP = 0.1
+#: The open sense mode rings at the split for 1/sigma = 0.1 s: its runs hold the step longer.
+HOLD_S = {"force-rebalance": 0.25, "open-loop": 0.6}
 
 
 def _device(overrides):
@@ -84,45 +87,46 @@ def test_bad_input_names_the_key(make_scenario, body, key):
     assert key in str(err.value)
 
 
-#: Simulated seconds after the step: the open sense mode rings at the split for 1/sigma = 0.1 s.
-HOLD_S = {"force-rebalance": 0.25, "open-loop": 0.6}
-
-
-def _cross_check_body(topology: str) -> str:
-    qc = "[device.circuit.quadrature_control]\nenabled = true\n"
-    sense = f'[device.circuit.sense]\ntopology = "{topology}"\n'
-    rate = (f"[rate]\nstart_dps = 0.0\nsegments = [ {{ hold_s = {T_STEP} }}, {{ step_to_dps = {STEP_DPS} }}, "
-            f"{{ hold_s = {HOLD_S[topology]} }} ]\n")
-    return rate + sense + qc
-
-
-def _metrics(res, hold_s):
-    t = res.channels["time_s"]
-    r = res.channels["rate_V"]
-    pre = (t > T_STEP - 0.03) & (t <= T_STEP)
-    post = t > T_STEP + hold_s - 0.05
-    bias, final = r[pre].mean(), r[post].mean()
-    sf = (final - bias) / STEP_DPS
-    dev = np.abs(r - final) > 0.02 * abs(final - bias)
-    late = np.flatnonzero(dev & (t > T_STEP))
-    settle = (t[late[-1]] - T_STEP) if len(late) else 0.0
-    return dict(bias=bias, sf=sf, settle=settle, quad=res.channels["quadrature_V"][post].mean())
-
-
 @pytest.mark.parametrize("topology", ["force-rebalance", "open-loop"])
 @pytest.mark.parametrize("temperature_C", [-40.0, 25.0, 85.0])
-def test_envelope_matches_carrier(make_scenario, topology, temperature_C):
+def test_envelope_matches_carrier(topology, temperature_C):
     """Scale factor, bias, quadrature effort and 2 % settling time of a rate step, in both engines, with the
     quadrature loop closed and the rate loop closed or open."""
+    dev = _device({"circuit": {"sense": {"topology": topology}, "quadrature_control": {"enabled": True}}})
     hold = HOLD_S[topology]
-    path = make_scenario(_cross_check_body(topology), duration_s=T_STEP + hold, output_rate_Hz=2000.0,
-                         temperature_C=temperature_C)
-    car = _metrics(run_carrier(load_scenario(path, fidelity="carrier"), progress=False), hold)
-    env = _metrics(run_envelope(load_scenario(path, fidelity="envelope",
-                                              overrides=["scenario.envelope_step_s=0.0005"]), progress=False), hold)
-    pred = steady_state(build_diagram(load_scenario(path).device, temperature_C))
+    car = step_metrics(run_carrier(step_scenario(dev, temperature_C, hold), progress=False), hold)
+    env = step_metrics(run_envelope(step_scenario(dev, temperature_C, hold, "envelope"), progress=False), hold)
+    pred = steady_state(build_diagram(dev, temperature_C))
     assert env["sf"] == pytest.approx(car["sf"], rel=2e-3)
     assert env["quad"] == pytest.approx(car["quad"], rel=2e-3)
     assert env["bias"] == pytest.approx(car["bias"], abs=2e-3 * abs(car["sf"]) * STEP_DPS)
     assert env["bias"] == pytest.approx(pred.rate_V, abs=2e-3 * abs(car["sf"]) * STEP_DPS)
     assert env["settle"] == pytest.approx(car["settle"], abs=0.01, rel=0.2)
+
+
+def test_tuning_margins_and_simulation_check():
+    """The shipped gains keep 60 degrees of phase margin and 15 dB of gain margin over -40..85 C and Q_s +-20 %,
+    and the linear model's settling time is the carrier engine's within 30 %."""
+    dev = _device(FTR)
+    table = robust_table(dev, [-40.0, 25.0, 85.0], (0.8, 1.2))
+    assert all(m.stable for m in table)
+    assert min(m.phase_margin_deg for m in table) > 60.0
+    assert min(m.gain_margin_dB for m in table) > 15.0
+    chk = check_rate_step(dev, 25.0)
+    assert chk.settling_s == pytest.approx(chk.settling_predicted_s, rel=0.3)
+    assert chk.scale_factor_V_per_dps == pytest.approx(chk.scale_factor_predicted, rel=2e-3)
+
+
+def test_tune_rebalance_cli(tmp_path, capsys):
+    """``fmvmg tune --loop rebalance`` designs gains for a bandwidth and reports the margins; bad input exits 2."""
+    from fmvmg_sim.cli.main import main
+    out = tmp_path / "tune"
+    assert main(["tune", str(REPO / "scenarios" / "force_rebalance_rate.toml"), "--loop", "rebalance", "--bandwidth-Hz", "30",
+                 "--no-sim", "--grid-points", "2", "--q-tolerance", "0", "-o", str(out), "--json",
+                 "--no-progress"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["gains"]["ki_per_s"] == pytest.approx(2553.0 * 30 / 50, rel=0.01)  # Ki scales with the pole
+    assert data["worst"]["stable"] and data["worst"]["phase_margin_deg"] > 45
+    assert (out / "tune.json").exists()
+    assert main(["tune", "--loop", "rebalance", "--bandwidth-Hz", "0", "-o", str(tmp_path / "x")]) == 2
+    assert "--bandwidth-Hz" in capsys.readouterr().err
