@@ -105,16 +105,29 @@ def test_envelope_matches_carrier(topology, temperature_C):
 
 
 def test_tuning_margins_and_simulation_check():
-    """The shipped gains keep 60 degrees of phase margin and 15 dB of gain margin over -40..85 C and Q_s +-20 %,
-    and the linear model's settling time is the carrier engine's within 30 %."""
+    """The shipped gains keep 50 degrees of phase margin and 10 dB of gain margin over -40..85 C and Q_s +-20 %,
+    and the linear model's settling time is the carrier engine's within 10 %."""
     dev = _device(FTR)
     table = robust_table(dev, [-40.0, 25.0, 85.0], (0.8, 1.2))
     assert all(m.stable for m in table)
-    assert min(m.phase_margin_deg for m in table) > 60.0
-    assert min(m.gain_margin_dB for m in table) > 15.0
+    assert min(m.phase_margin_deg for m in table) > 50.0
+    assert min(m.gain_margin_dB for m in table) > 10.0
     chk = check_rate_step(dev, 25.0)
-    assert chk.settling_s == pytest.approx(chk.settling_predicted_s, rel=0.3)
-    assert chk.scale_factor_V_per_dps == pytest.approx(chk.scale_factor_predicted, rel=2e-3)
+    assert chk.settling_s == pytest.approx(chk.settling_predicted_s, rel=0.1)
+    assert chk.scale_factor_V_per_dps == pytest.approx(chk.scale_factor_predicted, rel=5e-4)
+    assert chk.bias_V == pytest.approx(chk.bias_predicted_V, abs=1e-3)
+
+
+def test_rate_loop_without_quadrature_loop():
+    """Without the quadrature loop the demodulator's 2-omega ripple of the quadrature signal reaches the
+    derivative; the fourth-order filter keeps what it adds to the bias in the carrier engine (which the
+    averaged model leaves out) below 0.15 deg/s, the scale factor within 1e-3."""
+    dev = _device({"circuit": {"sense": {"topology": "force-rebalance"}}})
+    car = step_metrics(run_carrier(step_scenario(dev, 25.0, 0.25), progress=False), 0.25)
+    dg = build_diagram(dev, 25.0)
+    sf = scale_factor_V_per_dps(dg)
+    assert car["sf"] == pytest.approx(sf, rel=1e-3)
+    assert abs(car["bias"] - steady_state(dg).rate_V) / sf < 0.15
 
 
 def test_tune_rebalance_cli(tmp_path, capsys):

@@ -57,8 +57,8 @@ EFFECTS_TEMPERATURE = ("start_C = 20.0\nsegments = [ { hold_s = 0.01 }, { ramp_t
                        " { ramp_to_C = 30.0, rate_C_per_min = 60.0 } ]")
 
 SHA256 = {
-    ("force_rebalance_rate", "carrier"): "7dc5e97f001101c2f6ccfd43d9c1b5e4f6e8c6711b57b0ed10104d590fe78b79",
-    ("force_rebalance_rate", "envelope"): "ccbb3fb3a021afe05c8204b51639bfd62b4843a704ff6288292fa998daf30111",
+    ("force_rebalance_rate", "carrier"): "403417b9093b8b4f469c86be9ec16b4477a39c1bc7feb9128b2820b69e60531f",
+    ("force_rebalance_rate", "envelope"): "47ab3c52e103a8a0018683d36c0770a29d5dc60aad2a5f423113406c67859433",
     ("nominal_a", "carrier"): "f7e8ed1d1d959812e4dcec044e3303b9ca7f82c066af88a80b7c64d38f1864d3",
     ("nominal_a", "envelope"): "04bdfae94cb47fbbb5e6527e4599179851d5bbf6c11c3f5810d441c4735495a9",
     ("nominal_a_stable_electronics", "carrier"): "eb49e50ec9e43bcf62f2a25b8b18ac07edcb59cfac81088b4b8b7d2eaf2bccb3",

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from blocks import RebalanceController
 from blocks.ops import numpy_ops
 
 from ..averaged import carrier_phasors
@@ -29,11 +30,13 @@ from ..numerics.layout import Layout, dot, matvec
 from .plan import OperatingPlan, initial_state, make_plan
 from .step import CARRIER_MODEL, N_CORE, N_NOISE, PARAMS, STATE, step
 
-STATE_R = Layout(STATE.fields + [("fy", ()), ("dkq", ()), ("ctl_i", (3,)), ("ctl_q", (3,)), ("u_fb", ()),
+#: States of each loop's controller (:class:`blocks.RebalanceController`).
+NC = len(RebalanceController.states)
+STATE_R = Layout(STATE.fields + [("fy", ()), ("dkq", ()), ("ctl_i", (NC,)), ("ctl_q", (NC,)), ("u_fb", ()),
                                  ("v_t", ())])
 PARAMS_R = Layout(PARAMS.fields + [
     ("Gam_fy", (N_CORE,)), ("Phi_dq", (N_CORE, N_CORE)),
-    ("Phi_ci", (3, 3)), ("Gam_ci", (3,)), ("C_ci", (3,)), ("Phi_cq", (3, 3)), ("Gam_cq", (3,)), ("C_cq", (3,)),
+    ("Phi_ci", (NC, NC)), ("Gam_ci", (NC,)), ("C_ci", (NC,)), ("Phi_cq", (NC, NC)), ("Gam_cq", (NC,)), ("C_cq", (NC,)),
     ("k_fb", ()), ("k_qt", ()), ("ftr", ()), ("qc", ()), ("mid_x", ()), ("mid_ps", ()),
 ])
 
@@ -95,7 +98,7 @@ def step_rebalance(x, p, w, ops=numpy_ops):
 
 def _ctl(Phi, Gam, c, e):
     out = matvec(Phi, c)
-    return [out[k] + Gam[k] * e for k in range(3)]
+    return [out[k] + Gam[k] * e for k in range(NC)]
 
 
 def _lpf(Phi, Gam, s, u):
@@ -201,8 +204,10 @@ def _dc_gain(Phi, Gam) -> float:
 
 def _hold(C, u: float) -> np.ndarray:
     """The controller state (low-pass at zero, integrator) whose output is ``u``."""
-    ki = float(C[2])
-    return np.array([0.0, 0.0, u / ki if ki else 0.0])
+    ki = float(C[-1])
+    out = np.zeros(NC)
+    out[-1] = u / ki if ki else 0.0
+    return out
 
 
 __all__ = ["STATE_R", "PARAMS_R", "step_rebalance", "CARRIER_REBALANCE_MODEL", "model_for", "loop_plan",

@@ -1,9 +1,9 @@
 """The averaged model with a closed sense loop: force-to-rebalance and quadrature control.
 
-Twelve states join the model of :mod:`fmvmg_sim.envelope.model` (after its integral K):
+Sixteen states join the model of :mod:`fmvmg_sim.envelope.model` (after its integral K):
 
 * each loop's controller (:class:`blocks.RebalanceController`: the demodulation low-pass and the
-  integrator, three states), driven by the sense-chain output demodulated with the nominal
+  integrator, five states), driven by the sense-chain output demodulated with the nominal
   reference, ``e = (K_m / 2) Re(V_s conj(R))``: the demodulation commutes with the slowly varying
   envelope as it does for the output low-pass;
 * the output low-pass (14) on each loop's effort and its integral over a sample.
@@ -20,17 +20,25 @@ are those of the open chain.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import expm
+
+from blocks import RebalanceController
 
 from ..averaged import carrier_phasors
 from ..diagram import Diagram
-from ..numerics.discretize import batched_factor, noise_covariance
+from ..numerics.discretize import noise_covariance
 from ..numerics.layout import Layout
 from . import model as base
 from .model import IA, IK, ISI, ISI2, ISR, ISR2, IYI, IYR, N, N_NOISE
 from .step import _J, EnvelopeStep
 
-ICI, ICQ, IO, IJO, IOQ, IJQ = 14, 17, 20, 22, 23, 25
-N_R = 26
+NC = len(RebalanceController.states)
+ICI = N
+ICQ = ICI + NC
+IO = ICQ + NC
+IJO, IOQ = IO + 2, IO + 3
+IJQ = IOQ + 2
+N_R = IJQ + 1
 _NOISY = [i for i in range(N_R) if i != IK]  # states with a noise input (all but K, as in the open model)
 
 
@@ -81,8 +89,8 @@ class SenseLoopExtension:
         C_ci = loop.controller.state_space_matrices()[2][0]
         C_cq = loop.quad_controller.state_space_matrices()[2][0]
         u_row, v_row = np.zeros(N_R), np.zeros(N_R)
-        u_row[ICI:ICI + 3] = C_ci if loop.force_rebalance else 0.0
-        v_row[ICQ:ICQ + 3] = C_cq if loop.quadrature_control else 0.0
+        u_row[ICI:ICI + NC] = C_ci if loop.force_rebalance else 0.0
+        v_row[ICQ:ICQ + NC] = C_cq if loop.quadrature_control else 0.0
         # the loops' force on the sense mode: its slow part, the drive's back-action and the pickoff
         for K, row in ((Kc, u_row), (Kv, v_row)):
             M2[IYR] += (ctx["rs"] * K).real * row
@@ -98,7 +106,7 @@ class SenseLoopExtension:
         for on, blk, i0, R in ((loop.force_rebalance, loop.controller, ICI, ctx["ss"].R_I),
                                (loop.quadrature_control, loop.quad_controller, ICQ, ctx["ss"].R_Q)):
             A_c, B_c, _, _ = blk.state_space_matrices()
-            sl = slice(i0, i0 + 3)
+            sl = slice(i0, i0 + NC)
             M2[sl, sl] = A_c
             if not on:
                 continue
@@ -141,8 +149,8 @@ class SenseLoopExtension:
         for on, blk, i0, R in ((loop.force_rebalance, loop.controller, ICI, ctx["ss"].R_I),
                                (loop.quadrature_control, loop.quad_controller, ICQ, ctx["ss"].R_Q)):
             if on:
-                G[i0:i0 + 3] = np.outer(blk.state_space_matrices()[1][:, 0] * g_d, R.real * vs[0] + R.imag * vs[1])
-        Qf = noise_covariance(M_free, G, np.diag(q), h_s)
+                G[i0:i0 + NC] = np.outer(blk.state_space_matrices()[1][:, 0] * g_d, R.real * vs[0] + R.imag * vs[1])
+        Qf = _covariance_by_doubling(M_free, G, np.diag(q), h_s)
         Q = Qf[np.ix_(_NOISY, _NOISY)]
         return Q, noise_factor(Q)
 
@@ -173,10 +181,39 @@ def _extend_steady(dg: Diagram, x_ss: np.ndarray, ss, C0: complex, A0: float, w:
     x[:N] = x_ss
     x[IYR] -= (ds * F).real  # the slow part: less the loops' force's feedthrough
     x[IYI] -= (ds * F).imag
-    x[ICI:ICI + 3] = loop.controller.state_for_output(u)
-    x[ICQ:ICQ + 3] = loop.quad_controller.state_for_output(v)
+    x[ICI:ICI + NC] = loop.controller.state_for_output(u)
+    x[ICQ:ICQ + NC] = loop.quad_controller.state_for_output(v)
     x[IO], x[IOQ] = u, v
     return x
+
+
+def _covariance_by_doubling(M: np.ndarray, G: np.ndarray, Qc: np.ndarray, h_s: float) -> np.ndarray:
+    """The one-step noise covariance for a step far longer than the fastest time constant.
+
+    Van Loan's exponential holds ``exp(-M h)``, which overflows the precision when ``|M| h`` is large (the
+    controllers' 2 kHz low-pass over a 10 ms step: e^126); it is taken over ``h / 2^k`` with
+    ``|M| h / 2^k < 1`` and doubled ``k`` times, ``Q(2t) = Q(t) + Phi(t) Q(t) Phi(t)^T``.
+    """
+    k = max(0, int(np.ceil(np.log2(max(1.0, np.abs(np.linalg.eigvals(M)).max() * h_s)))))
+    t = h_s / 2 ** k
+    Q = noise_covariance(M, G, Qc, t)
+    Phi = expm(M * t)
+    for _ in range(k):
+        Q = Q + Phi @ Q @ Phi.T
+        Phi = Phi @ Phi
+    return Q
+
+
+def _psd_sqrt(Q: np.ndarray) -> np.ndarray:
+    """Square roots ``L L^T = Q`` of a stack of covariances, balanced by their standard deviations, with the
+    eigenvalues rounding has pushed below zero clipped: the loops' fast controller states are almost
+    deterministic functions of the slow ones over a long step, so the covariance is singular to rounding
+    and a Cholesky factor does not exist."""
+    Q = 0.5 * (Q + np.swapaxes(Q, 1, 2))
+    d = np.sqrt(np.clip(np.einsum("kii->ki", Q), 0.0, None))
+    safe = np.where(d > 0, d, 1.0)
+    lam, V = np.linalg.eigh(Q / (safe[:, :, None] * safe[:, None, :]))
+    return (d[:, :, None] * V) * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]
 
 
 def noise_factor(Q: np.ndarray) -> np.ndarray:
@@ -191,7 +228,7 @@ def noise_factor(Q: np.ndarray) -> np.ndarray:
     ndarray, shape (..., N_R, N_R - 1)
     """
     Q = np.asarray(Q)
-    Lq = batched_factor(Q.reshape(-1, N_R - 1, N_R - 1))
+    Lq = _psd_sqrt(Q.reshape(-1, N_R - 1, N_R - 1))
     L = np.zeros((len(Lq), N_R, N_R - 1))
     L[:, _NOISY] = Lq
     return L.reshape(Q.shape[:-2] + (N_R, N_R - 1))
