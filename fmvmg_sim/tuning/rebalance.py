@@ -89,7 +89,7 @@ class RebalanceMetrics:
     bandwidth_Hz : float
         First frequency where the rate output leaves +-3 dB of its DC value.
     peak_dB : float
-        Largest gain of the rate output relative to DC up to the bandwidth.
+        Largest gain of the rate output relative to DC (the open chain's resonance at the split).
     settling_s : float
         2 % settling time of the rate output's step response.
     stable : bool
@@ -163,7 +163,7 @@ def analyze(dg: Diagram, temperature_C: float, q_factor: float = 1.0) -> Rebalan
     rel = resp / dc
     below = np.flatnonzero((rel < 1 / np.sqrt(2)) | (rel > np.sqrt(2)))  # out of the +-3 dB band
     bw = float(_F_HZ[below[0]]) if len(below) else float(_F_HZ[-1])
-    peak = float(20 * np.log10(rel[: below[0] if len(below) else None].max()))
+    peak = float(20 * np.log10(rel.max()))
     t = np.linspace(0, 2.0, 40001)
     y = np.asarray(control.step_response(T, t).outputs).ravel() / dc
     out_band = np.flatnonzero(np.abs(y - 1) > 0.02)
