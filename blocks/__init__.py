@@ -20,11 +20,12 @@ from .multiplier import Multiplier
 from .phase_shifter import AllPassPhaseShifter
 from .pi import PIController
 from .pickoff import CapacitivePickoff
+from .rebalance import QuadratureTuningElectrodes, RebalanceController
 from .rectifier import FullWaveRectifier
 from .resonator import TwoModeResonator
 
 __all__ = [
     "Block", "LinearBlock", "DifferentialAmplifier", "AllPassPhaseShifter", "FullWaveRectifier",
     "LowPass1", "LowPass2", "SummingJunction", "PIController", "Multiplier", "ElectrostaticDrive",
-    "CapacitivePickoff", "TwoModeResonator",
+    "CapacitivePickoff", "TwoModeResonator", "RebalanceController", "QuadratureTuningElectrodes",
 ]

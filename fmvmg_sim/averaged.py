@@ -312,6 +312,9 @@ def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = No
     k_out = dg.output_lpf.gain
     rate_V = k_out * dg.demodulator.baseband(V_s, p["R_I"])
     quad_V = k_out * dg.demodulator.baseband(V_s, p["R_Q"])
+    if dg.sense_loop is not None:  # closed-loop sense (fmvmg_sim.rebalance): the loops null their channels
+        loop = dg.sense_loop.steady_outputs(dg, w, A, V_s, Y, p["carrier"], p["R_I"], p["R_Q"])
+        V_s, Y, rate_V, quad_V = loop["V_s"], loop["Y"], loop["rate_V"], loop["quadrature_V"]
     return SteadyState(omega_rad_s=w, f_Hz=w / (2 * np.pi), amplitude_m=A, v_ps_amplitude_V=abs(p["V_ps"]),
                        agc_effort_V=float(u.real), modulator_gain=float(abs(p["V_ac"]) / abs(p["V_ps"])),
                        rate_V=float(rate_V), quadrature_V=float(quad_V), loop_phase_error_rad=loop_phase_error(dg),

@@ -20,7 +20,7 @@ import numpy as np
 from . import thermal_laws as law
 from .errors import InputError
 from .paths import scenarios_dir
-from .schema import Choice, Num, Text, validate_tree
+from .schema import Bool, Choice, Num, Text, validate_tree
 from .tomlio import load_toml
 from .uncertainty import TOLERANCE_SCHEMA
 
@@ -68,6 +68,13 @@ DEVICE_SCHEMA = {
         "demodulator": {"k_per_V": Num(positive=True), "phase_trim": Num(-3.2, 3.2, allow=("auto",)),
                         "phase_tc_rad_per_K": Num(-0.1, 0.1)},
         "output_lpf": {"f_c_Hz": Num(positive=True), "gain": Num()},
+        # closed-loop sense (fmvmg_sim.rebalance): optional tables, open loop without them
+        "sense": {"topology": Choice(("open-loop", "force-rebalance"))},
+        "rebalance": {"dC_dx_F_per_m": Num(positive=True), "vdc_V": Num(positive=True),
+                      "k_mod_per_V": Num(positive=True), "filter_f_c_Hz": Num(positive=True),
+                      "kp": Num(lo=0), "ki_per_s": Num(positive=True), "kd_s": Num(lo=0)},
+        "quadrature_control": {"enabled": Bool(), "dk_dV_N_per_m_per_V": Num(positive=True),
+                               "filter_f_c_Hz": Num(positive=True), "kp": Num(lo=0), "ki_per_s": Num(positive=True)},
     },
     "noise": {
         "sense_input_V_per_sqrtHz": Num(lo=0), "drive_input_V_per_sqrtHz": Num(lo=0),
@@ -81,7 +88,8 @@ DEVICE_SCHEMA = {
 #: Keys a device file may leave out (they default to zero: the unmodelled effects switch them on).
 OPTIONAL_KEYS = {"mechanics.duffing_k3_rel", "thermal.q_extra_tc_per_K", "thermal.split_extra_Hz_per_K",
                  "thermal.q_curvature_per_K2",
-                 "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K"}
+                 "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K",
+                 "circuit.sense", "circuit.rebalance", "circuit.quadrature_control"}
 
 DEVICES_DIR = scenarios_dir() / "devices"
 
@@ -273,6 +281,7 @@ class Device:
             "demodulator": {k: val for k, val in ci["demodulator"].items() if k != "phase_tc_rad_per_K"},
             "output_lpf": dict(ci["output_lpf"]),
         }
+        circ.update({k: dict(ci[k]) for k in ("sense", "rebalance", "quadrature_control") if k in ci})
         return OperatingPoint(float(temperature_C), {
             "mechanics": mech, "circuit": circ, "noise": dict(v["noise"]), "delta_T_K": dT,
             "board_delta_T_K": dTb,

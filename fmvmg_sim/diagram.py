@@ -31,6 +31,7 @@ from blocks import (AllPassPhaseShifter, CapacitivePickoff, DifferentialAmplifie
                     FullWaveRectifier, LowPass2, Multiplier, PIController, SummingJunction, TwoModeResonator)
 
 from .device import Device, OperatingPoint
+from .rebalance import build_sense_loop
 
 #: External inputs of the linear core, in order.
 CORE_INPUTS = ("F_x_ext", "F_y_ext", "n_drive", "n_sense")
@@ -84,6 +85,8 @@ class Diagram:
         self.demodulator = Multiplier(name="demodulator", k_per_V=c["demodulator"]["k_per_V"])
         self.output_lpf = LowPass2(name="output_lpf", **c["output_lpf"])
         self.noise = self.op["noise"]
+        #: Force-to-rebalance and quadrature control (:mod:`fmvmg_sim.rebalance`); None for the open loop.
+        self.sense_loop = build_sense_loop(c)
 
     @property
     def temperature_C(self) -> float:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from blocks import (AllPassPhaseShifter, CapacitivePickoff, DifferentialAmplifier, ElectrostaticDrive,
-                    FullWaveRectifier, LowPass1, LowPass2, Multiplier, PIController, SummingJunction,
-                    TwoModeResonator)
+                    FullWaveRectifier, LowPass1, LowPass2, Multiplier, PIController, QuadratureTuningElectrodes,
+                    RebalanceController, SummingJunction, TwoModeResonator)
 from blocks.base import LinearBlock
 from fmvmg_sim.numerics.discretize import expm_derivative, zoh
 
@@ -23,6 +23,8 @@ LINEAR_BLOCKS = [
     LowPass1(f_c_Hz=100.0, gain=2.0),
     LowPass2(f_c_Hz=200.0, gain=5.0),
     PIController(kp=68.0, ki_per_s=330.0),
+    RebalanceController(f_c_Hz=2000.0, kp=4.0, ki_per_s=2500.0, kd_s=0.0156),
+    QuadratureTuningElectrodes(dk_dV_N_per_m_per_V=0.1),
 ]
 
 

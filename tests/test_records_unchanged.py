@@ -57,6 +57,8 @@ EFFECTS_TEMPERATURE = ("start_C = 20.0\nsegments = [ { hold_s = 0.01 }, { ramp_t
                        " { ramp_to_C = 30.0, rate_C_per_min = 60.0 } ]")
 
 SHA256 = {
+    ("force_rebalance_rate", "carrier"): "403417b9093b8b4f469c86be9ec16b4477a39c1bc7feb9128b2820b69e60531f",
+    ("force_rebalance_rate", "envelope"): "df215b7f38c9c7809c398df2e014b9c6b57d94e063831d3bf1d7f4317bc6c0d5",
     ("nominal_a", "carrier"): "f7e8ed1d1d959812e4dcec044e3303b9ca7f82c066af88a80b7c64d38f1864d3",
     ("nominal_a", "envelope"): "068754c5212b04c15be0bd2e3aaf9fe5bffe5a6dbd1b55c1316053257f2cf669",
     ("nominal_a_stable_electronics", "carrier"): "eb49e50ec9e43bcf62f2a25b8b18ac07edcb59cfac81088b4b8b7d2eaf2bccb3",

@@ -29,10 +29,8 @@ from ..effects import EffectSet
 from ..result import SimResult, engine_result
 from ..scenario import Scenario
 from ..slow_noise import draw_slow_noises
-from .plan import initial_state, make_plan
-from .step import CARRIER_MODEL, N_NOISE, PARAMS, STATE
-
-STATE_P = PARAMS.size
+from .rebalance import loop_initial_state, loop_plan, model_for
+from .step import N_NOISE, STATE
 
 #: Temperatures are rounded to this step (K) when caching discretised operating points.
 T_QUANTUM_K = 1e-3
@@ -92,6 +90,7 @@ class _Unit:
         self.noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
         self.any_noise = nz["brownian"] or nz["electronic"]
         self.scale = ref.core_state_scale()
+        self.model = model_for(ref)  # with the closed sense loops' states when the device has them
         # operating points, cached per 1 mK of die and of board temperature
         self.keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K
         self.board_keys = np.round(board / T_QUANTUM_K) * T_QUANTUM_K
@@ -99,9 +98,9 @@ class _Unit:
         self._device_id = dev.content_key
         self.per_call = max(1, int(round(CALL_S / dt_out)))
         p0 = self.plan_for(self.keys[0], self.board_keys[0])
-        self.x = initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
-                               from_steady=scn.settings["initial"]["state"] == "steady")
-        self.X = np.empty((n, STATE.size))
+        self.x = loop_initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
+                                    from_steady=scn.settings["initial"]["state"] == "steady")
+        self.X = np.empty((n, self.model.state.size))
 
     def plan_for(self, key, board_key):
         """The operating plan at die temperature ``key`` and board temperature ``board_key`` (both rounded)."""
@@ -111,7 +110,7 @@ class _Unit:
             plan = _PLANS.get(ck)
             if plan is None:
                 with _one_blas_thread():
-                    plan = make_plan(build_diagram(self.dev, key[0], board_C=key[1]), self.h, self.noise_on,
+                    plan = loop_plan(build_diagram(self.dev, key[0], board_C=key[1]), self.h, self.noise_on,
                                      self.scale)
                 _PLANS[ck] = plan
                 while len(_PLANS) > PLAN_CACHE_SIZE:
@@ -129,7 +128,7 @@ class _Unit:
 
     def params(self, k0: int, k1: int) -> np.ndarray:
         """Parameter rows of samples ``k0 .. k1 - 1``."""
-        P = np.empty((k1 - k0, STATE_P))
+        P = np.empty((k1 - k0, self.model.params.size))
         uniq, inv = self.operating_points(k0, k1)
         for j, (key, board_key) in enumerate(uniq):
             rows = np.flatnonzero(inv == j)
@@ -224,20 +223,19 @@ def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=No
     units = [_Unit(scn) for scn in scns]
     groups: dict = {}
     for u in units:
-        groups.setdefault((u.M, u.n, u.per_call, u.any_noise), []).append(u)
-    roll = load_rollout(CARRIER_MODEL, log)
-    # a pack of lanes costs about 1.8 units' time: worth it from three units on
-    packed = (load_rollout(CARRIER_MODEL, log, lanes=True)
-              if any(len(g) >= MIN_PACKED_UNITS for g in groups.values()) else roll)
+        groups.setdefault((u.model.name, u.M, u.n, u.per_call, u.any_noise), []).append(u)
     total = sum(u.n for u in units)
-    per_step_s = (100e-9 if len(units) == 1 else 60e-9) if roll.compiled else 1e-6
+    compiled = load_rollout(units[0].model, log).compiled
+    per_step_s = (100e-9 if len(units) == 1 else 60e-9) if compiled else 1e-6
     est_s = sum(u.n * u.M for u in units) * per_step_s + 0.04 * sum(
         len(u.operating_points()[0]) for u in units)
     show = progress if progress is not None else est_s > 3.0
     desc = f"carrier {scns[0].name}" if len(units) == 1 else f"carrier x{len(units)}"
     bar = tqdm(total=total, disable=not show, file=sys.stderr, unit="sample", desc=desc, mininterval=0.5)
     for group in groups.values():
-        _advance(group, packed if len(group) >= MIN_PACKED_UNITS else roll, bar)
+        # a pack of lanes costs about 1.8 units' time: worth it from three units on
+        roll = load_rollout(group[0].model, log, lanes=len(group) >= MIN_PACKED_UNITS)
+        _advance(group, roll, bar)
     bar.close()
     return [u.result(u.roll) for u in units]
 

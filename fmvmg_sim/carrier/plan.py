@@ -11,6 +11,7 @@ from blocks import FullWaveRectifier
 from ..averaged import SteadyState, steady_state
 from ..diagram import CORE_INPUTS, CORE_OUTPUTS, NORMALISER_FLOOR_REL, Diagram
 from ..numerics.discretize import expm_derivative, zoh
+from ..numerics.layout import Layout
 from .step import N_CORE, PARAMS, STATE
 
 #: Floor of the carrier normaliser, as a fraction of the v_ps amplitude at the set-point (the diagram's).
@@ -44,6 +45,8 @@ class OperatingPlan:
     C_y: np.ndarray
     A_core: np.ndarray
     _packed: np.ndarray | None = None
+    #: The parameter layout (a closed sense loop's model extends :data:`PARAMS`).
+    layout: Layout = PARAMS
 
     def params(self, rate_rad_s=0.0, phase_offset_rad=0.0, vref_factor=1.0, quad_rel=0.0) -> np.ndarray:
         """Packed parameter vectors, one row per output sample (vectorised over the arguments).
@@ -66,7 +69,7 @@ class OperatingPlan:
         rate = np.atleast_1d(np.asarray(rate_rad_s, dtype=float))
         k = max(rate.size, np.size(phase_offset_rad), np.size(vref_factor), np.size(quad_rel))
         if self._packed is None:
-            self._packed = PARAMS.pack(self.base)
+            self._packed = self.layout.pack(self.base)
         P = np.repeat(self._packed[None, :], k, axis=0)
         P[:, PARAMS.slices["Phi"]] += np.broadcast_to(rate, (k,))[:, None] * self.phi_rate.ravel()[None, :]
         dq = self.k_quad_N_per_m * np.broadcast_to(np.asarray(quad_rel, dtype=float), (k,))
@@ -143,6 +146,7 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
         n_floor_V=dg.normaliser_floor_V(), quad_coef=dg.comb_drive.quadratic_coef_N_per_V2,
         vdc2=dg.comb_drive.vdc_V ** 2, cos_ref=1.0, sin_ref=0.0, k_demod=dg.demodulator.k_per_V,
         Phi_out=Phi_out, Gam_out=Gam_out[:, 0], h=h_s,
+        Gam_fy=Gam[:, CORE_INPUTS.index("F_y_ext")],  # a closed sense loop's force (carrier.rebalance)
     )
     return OperatingPlan(base=base, phi_rate=Phi_w, phi_quad=Phi_q, k_quad_N_per_m=dg.resonator.k_quad_N_per_m,
                          trim_rad=dg.phase_trim_rad, scale=S, steady=ss,

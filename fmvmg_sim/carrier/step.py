@@ -44,7 +44,7 @@ PARAMS = Layout([
 ])
 
 
-def step(x, p, w, ops=numpy_ops):
+def step(x, p, w, ops=numpy_ops, dz=None):
     """Advance the diagram by one step.
 
     Parameters
@@ -57,6 +57,9 @@ def step(x, p, w, ops=numpy_ops):
         Standard-normal noise draws for this step (length :data:`N_NOISE`).
     ops : object, optional
         Math backend (numpy or CasADi).
+    dz : sequence, optional
+        A further change of the core state over the step (:data:`N_CORE` values): a closed sense loop's
+        feedback force and quadrature tuning (:mod:`fmvmg_sim.carrier.rebalance`).
 
     Returns
     -------
@@ -72,12 +75,14 @@ def step(x, p, w, ops=numpy_ops):
     g = P(p, "k_mod") * u * n
     Phi, Phi_g = P(p, "Phi"), P(p, "Phi_g")
     Gw, Gfx = P(p, "Gam_w"), P(p, "Gam_fx")
-    dz = matvec(Phi_g, z)
+    dz_g = matvec(Phi_g, z)
     lin = matvec(Phi, z)
     wn = matvec(Gw, list(w))
     fq = S(x, "fq")
     dg = g - P(p, "g0")
-    z1 = [lin[i] + dg * dz[i] + wn[i] + Gfx[i] * fq for i in range(N_CORE)]
+    z1 = [lin[i] + dg * dz_g[i] + wn[i] + Gfx[i] * fq for i in range(N_CORE)]
+    if dz is not None:
+        z1 = [z1[i] + dz[i] for i in range(N_CORE)]
     vx1 = dot(P(p, "C_vx"), z1) + P(p, "off_vx")
     vps1 = dot(P(p, "C_vps"), z1) + P(p, "off_vps")
     vs1 = dot(P(p, "C_vs"), z1) + P(p, "off_vs")

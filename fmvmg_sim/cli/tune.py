@@ -55,6 +55,11 @@ def register(sub) -> None:
                    help="Kp values: N points from LO to HI (default 20 200 10)")
     g.add_argument("--ki-grid", nargs=3, type=float, metavar=("LO", "HI", "N"), default=[100.0, 1500.0, 8],
                    help="Ki values (1/s): N points from LO to HI (default 100 1500 8)")
+    p.add_argument("--loop", choices=("agc", "rebalance"), default="agc",
+                   help="the loop to tune: the drive amplitude loop (default) or the force-to-rebalance sense loop "
+                        "(its margins over -40..85 C and Q_s +- --q-tolerance, checked with carrier-engine rate steps)")
+    p.add_argument("--bandwidth-Hz", type=float, default=None,
+                   help="--loop rebalance: design the gains for this integral pole (default: check the device's)")
     p.add_argument("--no-progress", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=main)
 
@@ -111,6 +116,8 @@ def main(args) -> int:
     device = scn.device
     out = Path(args.out) if args.out else Path("out") / "tune"
     temps = args.temperatures or list(CHECK_TEMPERATURES_C)
+    if args.loop == "rebalance":
+        return _rebalance(args, device, out, temps, log)
     if args.sweep:
         return _sweep(args, device, out, temps, log)
     qt = args.q_tolerance
@@ -136,6 +143,31 @@ def main(args) -> int:
     else:
         sys.stdout.write(format_table(report) + "\n")
         sys.stdout.write(f"wrote {out}/tune.json" + ("" if args.no_plots else " and plots") + "\n")
+    return 0
+
+
+def _rebalance(args, device, out, temps, log) -> int:
+    import numpy as np
+
+    from ..output import output_folder
+    from ..record import atomic_write_text
+    from ..tuning.rebalance import format_rebalance_table, rebalance_report
+    from ..errors import InputError
+    if args.bandwidth_Hz is not None and not args.bandwidth_Hz > 0:
+        raise InputError(f"expected > 0, got {args.bandwidth_Hz:g}", "--bandwidth-Hz")
+    qt = args.q_tolerance
+    report = rebalance_report(device, temps, list(np.linspace(-40.0, 85.0, args.grid_points)),
+                              (1.0 - qt, 1.0, 1.0 + qt) if qt > 0 else (1.0,), args.bandwidth_Hz,
+                              simulate=not args.no_sim, log=log)
+    data = strict(report)
+    data["scenario"] = str(args.scenario)
+    with output_folder(out, command="tune") as tmp:
+        atomic_write_text(tmp / "tune.json", json.dumps(data, indent=2) + "\n")
+    if args.json:
+        sys.stdout.write(json.dumps(data) + "\n")
+    else:
+        sys.stdout.write(format_rebalance_table(report) + "\n")
+        sys.stdout.write(f"wrote {out}/tune.json\n")
     return 0
 
 

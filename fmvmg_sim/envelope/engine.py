@@ -15,6 +15,9 @@ from __future__ import annotations
 import sys
 import time
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 from scipy.interpolate import CubicSpline
 from tqdm import tqdm
@@ -22,11 +25,13 @@ from tqdm import tqdm
 from ..compiled import load_rollout
 from ..diagram import build_diagram
 from ..effects import EffectSet
+from ..numerics.layout import Layout
 from ..result import SimResult, engine_result
 from ..scenario import Scenario
 from ..slow_noise import draw_slow_noises
-from .model import IA, N_NOISE, PARAMS, N, noise_factor, operating_params, steady_vector
-from .step import ENVELOPE_MODEL, INPUTS, N_IN, STATE
+from . import rebalance
+from .model import IA, PARAMS, N, noise_factor, operating_params, steady_vector
+from .step import ENVELOPE_MODEL, INPUTS, STATE
 
 #: Spacing of the temperature grid on which the averaged model is discretised (K).
 T_GRID_K = 5.0
@@ -41,6 +46,30 @@ BLOCK_SPAN_K = 0.2
 CALL_S = 600.0
 
 
+@dataclass(frozen=True)
+class _Kit:
+    """The averaged model a device runs in: the open sense chain's, or with its closed sense loops."""
+
+    operating_params: Callable
+    params: Layout
+    noise_factor: Callable
+    steady_vector: Callable
+    model: object
+    state: Layout
+    inputs: Layout
+    n: int
+
+
+_OPEN = _Kit(operating_params, PARAMS, noise_factor, steady_vector, ENVELOPE_MODEL, STATE, INPUTS, N)
+_LOOPS = _Kit(rebalance.operating_params, rebalance.PARAMS_R, rebalance.noise_factor, rebalance.steady_vector,
+              rebalance.ENVELOPE_REBALANCE_MODEL, rebalance.REBALANCE_STEP.state, rebalance.REBALANCE_STEP.inputs,
+              rebalance.N_R)
+
+
+def _kit(device) -> _Kit:
+    return _OPEN if device.reference_diagram.sense_loop is None else _LOOPS
+
+
 class _ParamTable:
     """Packed parameter vectors of the averaged model as a smooth function of die and board temperature.
 
@@ -49,7 +78,8 @@ class _ParamTable:
     nodes, at most :data:`OFFSET_GRID_K` apart, spanning the offsets the run visits.
     """
 
-    def __init__(self, device, h_s, noise_on, t_lo, t_hi, off_lo=0.0, off_hi=0.0):
+    def __init__(self, device, h_s, noise_on, t_lo, t_hi, off_lo=0.0, off_hi=0.0, kit=_OPEN):
+        self.kit = kit
         if t_hi - t_lo < 1e-6:
             grid = np.array([t_lo])
         else:
@@ -62,9 +92,9 @@ class _ParamTable:
             self.offsets = np.linspace(off_lo, off_hi, max(3, int(np.ceil((off_hi - off_lo) / OFFSET_GRID_K)) + 1))
         tables, covs = [], []
         for T in grid:
-            ops = [operating_params(build_diagram(device, float(T), board_C=float(T + o)), h_s, noise_on)
+            ops = [kit.operating_params(build_diagram(device, float(T), board_C=float(T + o)), h_s, noise_on)
                    for o in self.offsets]
-            tables.append([PARAMS.pack(op) for op in ops])
+            tables.append([kit.params.pack(op) for op in ops])
             covs.append([op["Q"] for op in ops])
         self.table = np.array(tables)  # (die, offset, param)
         self.cov = np.array(covs)
@@ -88,7 +118,8 @@ class _ParamTable:
         pairs, inverse = np.unique(np.stack([T, offset], axis=1), axis=0, return_inverse=True)
         if len(pairs) < len(T):
             return self(pairs[:, 0], pairs[:, 1])[inverse.reshape(-1)]
-        L = PARAMS.slices["L"]
+        L = self.kit.params.slices["L"]
+        noise_factor = self.kit.noise_factor
         if self.off_weights is None and self.spline is None:
             return np.repeat(self.table[:, 0], len(T), axis=0)
         if self.off_weights is None:  # the board follows the die at a fixed offset
@@ -217,15 +248,16 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     sig_fine = fx.signals(t_fine, die_fine)
     nz = scn.noise
     noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
+    kit = _kit(dev)
     tab = _ParamTable(dev, h, noise_on, float(min(temp_blk.min(), temp_all.min())),
-                      float(max(temp_blk.max(), temp_all.max())), float(off_blk.min()), float(off_blk.max()))
+                      float(max(temp_blk.max(), temp_all.max())), float(off_blk.min()), float(off_blk.max()), kit)
     rng = np.random.default_rng(scn.seed)
     n_steps = n_out * Mo
     slow = draw_slow_noises(scn, rng, n_out, dt_out)  # the phase flicker held over each output interval
-    x = _initial(scn, float(temp_blk[0]), float(off_blk[0]))
-    roll = load_rollout(ENVELOPE_MODEL, log)
+    x = _initial(scn, float(temp_blk[0]), float(off_blk[0]), kit)
+    roll = load_rollout(kit.model, log)
     any_noise = nz["brownian"] or nz["electronic"]
-    X = np.empty((n_out, STATE.size))
+    X = np.empty((n_out, kit.state.size))
     show = progress if progress is not None else n_steps > 3e6
     bar = tqdm(total=n_out, disable=not show, file=sys.stderr, unit="sample", desc=f"envelope {scn.name}",
                mininterval=0.5)
@@ -233,14 +265,14 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
         o0, nob = blocks[k0]
         o1 = blocks[k1 - 1][0] + nob
         s0, s1 = o0 * Mo, o1 * Mo
-        W = _inputs(scn, rng, any_noise, (s0 + np.arange(s1 - s0 + 1)) * h, t_fine, sig_fine,
+        W = _inputs(kit, scn, rng, any_noise, (s0 + np.arange(s1 - s0 + 1)) * h, t_fine, sig_fine,
                     np.repeat(slow.phase_rad[o0:o1], Mo))
         Xc = roll(x, tab(temp_blk[k0:k1], off_blk[k0:k1]), W, Mo, nob)
         X[o0:o1] = Xc
         x = roll.continue_from(Xc[-1])
         bar.update(o1 - o0)
     bar.close()
-    get = lambda name: X[:, STATE.slices[name]][:, 0]  # noqa: E731
+    get = lambda name: X[:, kit.state.slices[name]][:, 0]  # noqa: E731
     outputs = dict(rate_V=get("rate_V"), quadrature_V=get("quad_V"), drive_amplitude_V=get("amp_V"),
                    agc_effort_V=get("agc_V"), drive_frequency_Hz=get("freq_Hz"))
     internal = dict(drive_displacement_amplitude_m=get("x"), die_temperature_C=temp_all)
@@ -270,14 +302,15 @@ def _calls(blocks: list, max_outputs: int):
         k0 = k1
 
 
-def _inputs(scn: Scenario, rng, any_noise: bool, t_edges: np.ndarray, t_fine: np.ndarray, sig_fine: dict,
+def _inputs(kit: _Kit, scn: Scenario, rng, any_noise: bool, t_edges: np.ndarray, t_fine: np.ndarray, sig_fine: dict,
             phase: np.ndarray) -> np.ndarray:
     """Per-step inputs (:data:`~fmvmg_sim.envelope.step.INPUTS`) of the steps between ``t_edges``."""
     n = len(t_edges) - 1
-    W = np.empty((n, N_IN))
-    col = {name: sl.start for name, sl in INPUTS.slices.items()}
+    n_noise = kit.inputs.shapes["noise"][0]
+    W = np.empty((n, kit.inputs.size))
+    col = {name: sl.start for name, sl in kit.inputs.slices.items()}
     # float32 draws: half the cost of float64, and far finer than any noise level here
-    W[:, :N_NOISE] = rng.standard_normal((n, N_NOISE), dtype=np.float32) if any_noise else 0.0
+    W[:, :n_noise] = rng.standard_normal((n, n_noise), dtype=np.float32) if any_noise else 0.0
     for name, profile in (("rate", scn.rate), ("vref_f", scn.vref_factor)):
         W[:, col[name]], W[:, col[name] + 1] = profile.step_lines(t_edges)
     W[:, col["rate"]:col["rate"] + 2] *= np.pi / 180.0
@@ -294,16 +327,16 @@ def _inputs(scn: Scenario, rng, any_noise: bool, t_edges: np.ndarray, t_fine: np
     return W
 
 
-def _initial(scn: Scenario, T0: float, offset0: float = 0.0) -> np.ndarray:
+def _initial(scn: Scenario, T0: float, offset0: float = 0.0, kit: _Kit = _OPEN) -> np.ndarray:
     """Initial envelope state: at rest with the initial displacement, or on the averaged steady state at the die
     temperature ``T0`` with the board ``offset0`` above it."""
     dg = build_diagram(scn.device, T0, board_C=T0 + offset0)
-    x = dict(x=np.zeros(N), u=0.0, acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0, agc_V=0.0,
+    x = dict(x=np.zeros(kit.n), u=0.0, acc_t=0.0, acc_u=0.0, rate_V=0.0, quad_V=0.0, amp_V=0.0, agc_V=0.0,
              freq_Hz=dg.resonator.f_drive_Hz, refine=0.0)
     if scn.settings["initial"]["state"] == "steady":
-        x["x"], ss = steady_vector(dg, np.deg2rad(float(scn.rate(0.0))), float(scn.vref_factor(0.0)))
+        x["x"], ss = kit.steady_vector(dg, np.deg2rad(float(scn.rate(0.0))), float(scn.vref_factor(0.0)))
         x["u"], x["freq_Hz"] = ss.agc_effort_V, ss.f_Hz
         x["rate_V"], x["quad_V"] = ss.rate_V, ss.quadrature_V
     else:
         x["x"][IA] = scn.settings["initial"]["drive_displacement_m"]
-    return STATE.pack(x)
+    return kit.state.pack(x)

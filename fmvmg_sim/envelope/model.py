@@ -107,7 +107,7 @@ def _discretise(M: np.ndarray, Bu: np.ndarray, Bc: np.ndarray, bu: np.ndarray, h
     return dict(Phi=Phi, G0=G0[:, :N_U], G1=G1[:, :N_U], Gc=held[:, 0], Gu=held[:, 1])
 
 
-def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
+def operating_params(dg: Diagram, h_s: float, noise_on: dict, extension=None) -> dict:
     """Discretised averaged model at the diagram's operating point.
 
     Parameters
@@ -117,6 +117,10 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
         Envelope step.
     noise_on : dict
         Switches ``brownian`` and ``electronic``.
+    extension : object, optional
+        Further states coupled to the model (a closed sense loop,
+        :class:`fmvmg_sim.envelope.rebalance.SenseLoopExtension`): its ``system`` extends each piece's
+        matrices, its ``noise`` the noise gains and covariance, its ``steady`` the steady state.
 
     Returns
     -------
@@ -216,8 +220,11 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
         return M, Bu, Bc, bu
 
     out = {}
+    ctx = dict(dg=dg, ss=ss, w=w, A0=A0, C0=C0, Dd=Dd, kap0=kap0, rs=rs, ds=ds, kY=kY, Hse=Hse, Ao=Ao, Bo=Bo)
     for piece in PIECES:
         M, Bu, Bc, bu = system(piece == "free")
+        if extension is not None:
+            M, Bu, Bc, bu = extension.system(M, Bu, Bc, bu, ctx)
         if piece == "free":
             M_free, Bc_free = M, Bc
         for level, hl in (("step", h_s), ("sub", h_s / N_SUB)):
@@ -239,11 +246,16 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict) -> dict:
         Gn[i1:i2 + 1, 4:6] = np.outer(Bo, _cmat(Hse)[comp])
     q = np.array([psd_fd * abs(1 / Dd) ** 2 if br else 0.0, (dg.rectifier.gain * e_d) ** 2 / 2 if el else 0.0,
                   psd_fs if br else 0.0, psd_fs if br else 0.0, e_s ** 2 if el else 0.0, e_s ** 2 if el else 0.0])
-    Q = noise_covariance(M_free, Gn, np.diag(q), h_s)[:N_NOISE, :N_NOISE]
-    L = noise_factor(Q)
+    if extension is None:
+        Q = noise_covariance(M_free, Gn, np.diag(q), h_s)[:N_NOISE, :N_NOISE]
+        L = noise_factor(Q)
+    else:
+        Q, L = extension.noise(M_free, Gn, q, h_s, ctx)
     # the carrier normaliser's floor as a drive amplitude: below it the carrier is (Vdac / floor) v_ps
     a_floor = dg.normaliser_floor_V() * abs(C0) / (dg.vdac_V * abs(Hx * Hps))
     x_ss, _ = steady_vector(dg)
+    if extension is not None:
+        x_ss = extension.steady(x_ss, ctx)
     # frequency: theta' = Im[(u f_c + f_A A + kappa Y)/D_d]
     out.update(L=L, vref0=dg.vref_V, kp=kp, ki=ki, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
                R_I=[ss.R_I.real, ss.R_I.imag], R_Q=[ss.R_Q.real, ss.R_Q.imag],
