@@ -22,6 +22,7 @@ from .errors import InputError
 from .paths import scenarios_dir
 from .schema import Choice, Num, Text, validate_tree
 from .tomlio import load_toml
+from .pll_config import DRIVE_TOPOLOGIES, PLL_SCHEMA, pll_at
 from .uncertainty import TOLERANCE_SCHEMA
 
 _AMP = {"gain": Num(), "gbw_Hz": Num(positive=True), "gbw_tc_per_K": Num(-0.05, 0.05),
@@ -68,6 +69,9 @@ DEVICE_SCHEMA = {
         "demodulator": {"k_per_V": Num(positive=True), "phase_trim": Num(-3.2, 3.2, allow=("auto",)),
                         "phase_tc_rad_per_K": Num(-0.1, 0.1)},
         "output_lpf": {"f_c_Hz": Num(positive=True), "gain": Num()},
+        # the drive loop's topology and, for a PLL drive, its electronics (fmvmg_sim.pll_drive)
+        "drive": {"topology": Choice(DRIVE_TOPOLOGIES)},
+        "pll": PLL_SCHEMA,
     },
     "noise": {
         "sense_input_V_per_sqrtHz": Num(lo=0), "drive_input_V_per_sqrtHz": Num(lo=0),
@@ -81,7 +85,8 @@ DEVICE_SCHEMA = {
 #: Keys a device file may leave out (they default to zero: the unmodelled effects switch them on).
 OPTIONAL_KEYS = {"mechanics.duffing_k3_rel", "thermal.q_extra_tc_per_K", "thermal.split_extra_Hz_per_K",
                  "thermal.q_curvature_per_K2",
-                 "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K"}
+                 "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K",
+                 "circuit.drive", "circuit.pll"}
 
 DEVICES_DIR = scenarios_dir() / "devices"
 
@@ -157,6 +162,11 @@ class Device:
     def reference_temperature_C(self) -> float:
         """Temperature at which the nominal values hold."""
         return float(self.values["reference_temperature_C"])
+
+    @property
+    def drive_topology(self) -> str:
+        """The drive loop: ``"self-oscillating"`` (the phase-shifter loop, the default) or ``"pll"``."""
+        return self.values["circuit"].get("drive", {}).get("topology", "self-oscillating")
 
     @property
     def content_key(self) -> str:
@@ -273,6 +283,8 @@ class Device:
             "demodulator": {k: val for k, val in ci["demodulator"].items() if k != "phase_tc_rad_per_K"},
             "output_lpf": dict(ci["output_lpf"]),
         }
+        if self.drive_topology == "pll":  # the PLL's oscillator and loop filter, on the board
+            circ["pll"] = pll_at(ci.get("pll", {}), me["f_drive_Hz"], dTb)
         return OperatingPoint(float(temperature_C), {
             "mechanics": mech, "circuit": circ, "noise": dict(v["noise"]), "delta_T_K": dT,
             "board_delta_T_K": dTb,
