@@ -141,7 +141,7 @@ def kit_for(device, engine: str = "carrier") -> StepKit:
     """
     if device.drive_topology == "pll":
         if engine == "envelope":
-            from ..envelope.pll_step import PLL_ENVELOPE
+            from ..envelope.pll_plan import PLL_ENVELOPE
             return PLL_ENVELOPE
         return PLL_CARRIER
     return SELF_OSCILLATING_CARRIER
