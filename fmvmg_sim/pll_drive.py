@@ -161,10 +161,14 @@ class PLLSteadyState:
     locked: bool
 
 
-def _responses(pll: PLLDrive, omega: float, rate_rad_s: float, kx: float) -> dict:
-    """Phasors of the core's outputs per volt of ``v_ac`` at ``omega``."""
+def _core_matrices(pll: PLLDrive, rate_rad_s: float, kx: float) -> tuple:
     core = pll.core_system(rate_rad_s, kx)
-    A, B, C = np.asarray(core.A), np.asarray(core.B)[:, -1], np.asarray(core.C)
+    return np.asarray(core.A), np.asarray(core.B)[:, -1], np.asarray(core.C)
+
+
+def _responses(mats: tuple, omega: float) -> dict:
+    """Phasors of the core's outputs per volt of ``v_ac`` at ``omega`` (``mats`` from :func:`_core_matrices`)."""
+    A, B, C = mats
     h = C @ np.linalg.solve(1j * omega * np.eye(A.shape[0]) - A, B)
     return {name: complex(h[k]) for k, name in enumerate(CORE_OUTPUTS)}
 
@@ -186,9 +190,10 @@ def lock_frequency(pll: PLLDrive, rate_rad_s: float = 0.0, kx: float = 0.0) -> f
     res = pll.dg.resonator
     w0 = 2 * np.pi * res.f_drive_Hz
     half_bw = w0 / (2 * res.q_drive)
+    mats = _core_matrices(pll, rate_rad_s, kx)
 
     def pd(w):
-        return pll.detector.baseband(_responses(pll, w, rate_rad_s, kx)["v_x"])[0]
+        return pll.detector.baseband(_responses(mats, w)["v_x"])[0]
 
     lo, hi = w0 - 20 * half_bw, w0 + 20 * half_bw
     return float(brentq(pd, lo, hi, xtol=1e-9 * w0))
@@ -215,7 +220,7 @@ def pll_steady_state(pll: PLLDrive, rate_rad_s: float = 0.0, vref_V: float | Non
     kx = 0.0
     for _ in range(3):  # the Duffing stiffness at the amplitude, which the lock frequency moves little
         w = lock_frequency(pll, rate_rad_s, kx)
-        r = _responses(pll, w, rate_rad_s, kx)
+        r = _responses(_core_matrices(pll, rate_rad_s, kx), w)
         u = v_amp / (abs(r["v_x"]) * dg.modulator.k_per_V * dg.vdac_V)
         amp_m = abs(r["x"]) * pll.drive_voltage_V(u)
         kx_new = dg.resonator.duffing_stiffness(amp_m)

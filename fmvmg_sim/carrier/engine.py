@@ -121,6 +121,8 @@ class _Unit:
 
     def params(self, k0: int, k1: int) -> np.ndarray:
         """Parameter rows of samples ``k0 .. k1 - 1``."""
+        if self.kit.param_rows is not None:
+            return self.kit.param_rows(self, k0, k1)
         P = np.empty((k1 - k0, self.kit.model.params.size))
         uniq, inv = self.operating_points(k0, k1)
         for j, (key, board_key) in enumerate(uniq):

@@ -38,6 +38,9 @@ class StepKit:
         ``(scenario, f_ref_Hz) -> step length``.
     channels : callable
         ``(X, M, unit) -> (outputs, internal)``: record channels from the states at the output samples.
+    param_rows : callable, optional
+        ``(unit, k0, k1) -> rows``: the parameter rows of samples ``k0 .. k1 - 1``, when the kit makes
+        them itself (default: from one plan per operating point).
     """
 
     engine: str
@@ -46,6 +49,7 @@ class StepKit:
     initial_state: Callable
     step_s: Callable
     channels: Callable
+    param_rows: Callable | None = None
 
 
 def _cycle_step(scn, f_ref_Hz: float) -> float:

@@ -17,6 +17,7 @@ from ..diagram import CORE_INPUTS, CORE_OUTPUTS
 from ..numerics.discretize import expm_derivative, zoh
 from ..pll_drive import PLLDrive, build_pll_drive, pll_steady_state
 from .pll_step import PARAMS, PLL_ENVELOPE_MODEL, STATE
+from .pll_table import PLLEnvelopeTable
 
 #: Longest step of the PLL drive's envelope engine (s); an output interval is a whole number of steps.
 PLL_ENVELOPE_STEP_S = 50e-6
@@ -167,9 +168,21 @@ def _plan(device, die_C, board_C, h_s, noise_on, scale):
     return make_pll_envelope_plan(build_pll_drive(device, die_C, board_C), h_s, noise_on, scale)
 
 
+def _param_rows(unit, k0: int, k1: int) -> np.ndarray:
+    """The unit's parameter rows from its temperature table (built on first use)."""
+    table = unit.__dict__.get("pll_table")
+    if table is None:
+        table = unit.pll_table = PLLEnvelopeTable(
+            lambda die, board: _plan(unit.dev, die, board, unit.h, unit.noise_on, unit.scale),
+            (unit.dev.content_key, unit.h, tuple(sorted(unit.noise_on.items())), unit.scale.tobytes()))
+    s = slice(k0, k1)
+    return table.rows(unit.keys[s], unit.board_keys[s], np.deg2rad(unit.rate_dps[s]), unit.slow.phase_rad[s],
+                      unit.vref_f[s], unit.sig["quad_rel"][s])
+
+
 #: The PLL drive's envelope engine, for the carrier engine's roll-out.
 PLL_ENVELOPE = StepKit("envelope", PLL_ENVELOPE_MODEL, _plan, pll_envelope_initial_state, _envelope_step_s,
-                       lambda X, M, unit: pll_channels(X, M, unit, STATE, _displacement))
+                       lambda X, M, unit: pll_channels(X, M, unit, STATE, _displacement), _param_rows)
 
 __all__ = ["PLL_ENVELOPE", "PLL_ENVELOPE_STEP_S", "make_pll_envelope_plan", "pll_envelope_initial_state",
            "rotating_input"]
