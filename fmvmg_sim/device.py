@@ -22,7 +22,7 @@ from .errors import InputError
 from .paths import scenarios_dir
 from .schema import Choice, Num, Text, validate_tree
 from .tomlio import load_toml
-from .pll_config import DRIVE_TOPOLOGIES, PLL_SCHEMA, pll_at
+from .pll_config import DRIVE_TOPOLOGIES, PLL_SCHEMA, check_pll_values, pll_at
 from .uncertainty import TOLERANCE_SCHEMA
 
 _AMP = {"gain": Num(), "gbw_Hz": Num(positive=True), "gbw_tc_per_K": Num(-0.05, 0.05),
@@ -192,6 +192,10 @@ class Device:
         device without effects). Computed once per device content.
         """
         from .averaged import scale_factor_V_per_dps  # imports this module through the diagram (above)
+        if self.drive_topology == "pll":
+            from .pll_drive import build_pll_drive, pll_scale_factor_V_per_dps
+            return _derived(self, "nominal_scale_factor_V_per_dps", lambda: pll_scale_factor_V_per_dps(
+                build_pll_drive(self, self.reference_temperature_C, dg=self.reference_diagram)))
         return _derived(self, "nominal_scale_factor_V_per_dps",
                         lambda: scale_factor_V_per_dps(self.reference_diagram))
 
@@ -212,6 +216,7 @@ class Device:
         checked = validate_tree(overrides, DEVICE_SCHEMA, where, prefix="device.")
         merged = copy.deepcopy(self.values)
         _merge(merged, checked)
+        check_pll_values(merged, where)
         return Device(merged, self.path)
 
     def at(self, temperature_C: float, board_C: float | None = None) -> OperatingPoint:
@@ -367,6 +372,7 @@ def load_device(path: str | Path) -> Device:
     missing = _missing(values, DEVICE_SCHEMA)
     if missing:
         raise InputError(f"missing key(s) {missing}", str(path))
+    check_pll_values(values, str(path))
     return Device(values, str(p))
 
 

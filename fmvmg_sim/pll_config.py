@@ -8,6 +8,7 @@ default (:data:`PLL_DEFAULTS`), so a scenario need state only what it changes.
 
 from __future__ import annotations
 
+from .errors import InputError
 from .schema import Num
 
 #: Drive-loop topologies a device or scenario may select.
@@ -60,6 +61,27 @@ def pll_settings(values: dict) -> dict:
         raise ValueError(f"circuit.pll.v_min_V ({out['v_min_V']}) must be below circuit.pll.v_max_V "
                          f"({out['v_max_V']})")
     return out
+
+
+def check_pll_values(values: dict, where: str) -> None:
+    """Refuse ``[circuit.pll]`` settings that validate key by key but not together.
+
+    Parameters
+    ----------
+    values : dict
+        A device's validated values.
+    where : str
+        File name for the message.
+
+    Raises
+    ------
+    InputError
+        The tuning range is empty.
+    """
+    try:
+        pll_settings(values.get("circuit", {}).get("pll", {}))
+    except ValueError as err:
+        raise InputError(str(err), where) from None
 
 
 def pll_at(values: dict, f_drive_ref_Hz: float, board_delta_K: float) -> dict:
