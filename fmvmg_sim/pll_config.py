@@ -21,7 +21,7 @@ PLL_SCHEMA = {
     "pd_lpf_f_c_Hz": Num(positive=True), "pd_trim": Num(-3.2, 3.2, allow=("auto",)),
 }
 
-#: Defaults of ``[circuit.pll]`` (for ``fmvmg_a``: a 30 Hz phase loop with about 75 degrees of margin at
+#: Defaults of ``[circuit.pll]`` (for ``fmvmg_a``: a 36.5 Hz phase loop with 75 degrees of phase margin at
 #: the AGC's set-point amplitude; ``fmvmg tune --loop pll`` designs them for any device).
 PLL_DEFAULTS = {
     # the oscillator's free-running frequency, relative to the drive resonance at the reference temperature

@@ -146,3 +146,24 @@ def test_bad_topology_exits_2_from_the_cli(make_scenario, tmp_path, capsys):
     path = make_scenario('\n[circuit.drive]\ntopology = "vco"\n')
     assert main(["run", str(path), "-o", str(tmp_path / "o")]) == 2
     assert "circuit.drive.topology" in capsys.readouterr().err
+
+
+def test_pll_bias_tc_board_share_is_the_loops_without_the_phase_shifter():
+    """Through the board, the PLL's bias moves as the self-oscillating loop's does with the RC drift removed: what
+    the phase shifter's drift adds (on fmvmg_a it cancels part of the amplifiers') is all the difference."""
+    from fmvmg_sim.diagram import build_diagram
+    dev = load_device("fmvmg_a")
+    flat = dev.with_overrides({"circuit": {"phase_shifter": {"rc_tc_per_K": 0.0}}}, "test")
+    pll_dev = dev.with_overrides({"circuit": {"drive": {"topology": "pll"}}}, "test")
+
+    def share(bias, sf):
+        return 3600 * (bias(26.0) - bias(24.0)) / 2 / sf
+
+    pll_share = share(lambda b: pll_steady_state(build_pll_drive(pll_dev, 25.0, b)).rate_V,
+                      pll_scale_factor_V_per_dps(build_pll_drive(pll_dev, 25.0)))
+    flat_share = share(lambda b: steady_state(build_diagram(flat, 25.0, board_C=b)).rate_V,
+                       scale_factor_V_per_dps(build_diagram(flat, 25.0)))
+    loop_share = share(lambda b: steady_state(build_diagram(dev, 25.0, board_C=b)).rate_V,
+                       scale_factor_V_per_dps(build_diagram(dev, 25.0)))
+    assert pll_share == pytest.approx(flat_share, rel=0.02)
+    assert abs(pll_share - loop_share) > 10.0  # deg/h per K
