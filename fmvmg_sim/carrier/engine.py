@@ -134,7 +134,7 @@ class _Unit:
 
     def result(self, roll) -> SimResult:
         """The record channels of the finished roll-out."""
-        X, M, n = self.X, self.M, self.n
+        X, M = self.X, self.M
         outputs, internal = self.kit.channels(X, M, self)
         t_end = self.t_end
         case_end = np.asarray(self.scn.temperature.left_limit(t_end), dtype=float)  # over the sample

@@ -12,10 +12,10 @@ import numpy as np
 from scipy.linalg import expm
 
 from ..carrier.kits import StepKit, pll_channels
-from ..carrier.plan import OperatingPlan, _resonator_direction, noise_sigmas
-from ..diagram import CORE_INPUTS, CORE_OUTPUTS
-from ..numerics.discretize import expm_derivative, zoh
-from ..pll_drive import PLLDrive, build_pll_drive, pll_steady_state
+from ..carrier.plan import OperatingPlan
+from ..carrier.pll_plan import pll_plan_common
+from ..diagram import CORE_INPUTS
+from ..pll_drive import PLLDrive, build_pll_drive
 from .pll_step import PARAMS, PLL_ENVELOPE_MODEL, STATE
 from .pll_table import PLLEnvelopeTable
 
@@ -64,50 +64,14 @@ def make_pll_envelope_plan(pll: PLLDrive, h_s: float, noise_on: dict | None = No
     -------
     OperatingPlan
     """
-    noise_on = {"brownian": True, "electronic": True, **(noise_on or {})}
-    dg = pll.dg
-    ss = pll_steady_state(pll)
-    kx = dg.resonator.duffing_stiffness(ss.amplitude_m)
-    core = pll.core_system(0.0, kx)
-    S = dg.core_state_scale() if scale is None else np.asarray(scale, dtype=float)
-    Sinv = 1.0 / S
-    A0 = Sinv[:, None] * np.asarray(core.A) * S[None, :]
-    B = Sinv[:, None] * np.asarray(core.B)
-    C = np.asarray(core.C) * S[None, :]
-    w0 = ss.omega_rad_s
+    plan, B, sig = pll_plan_common(pll, h_s, noise_on, scale, PARAMS)
+    A0, w0 = plan.A_core, plan.steady.omega_rad_s
     b = B[:, -1:]
     G = rotating_input(A0, b, w0, h_s)[:, 0]
     G_w = (rotating_input(A0, b, w0 + _DW, h_s) - rotating_input(A0, b, w0 - _DW, h_s))[:, 0] / (2 * _DW)
     # white noise of one-sided PSD S: its complex envelope's parts each of PSD 2 S (twice the held real variance)
-    sig = np.sqrt(2.0) * noise_sigmas(dg, h_s, noise_on)
-    Nc = np.exp(-1j * w0 * h_s) * rotating_input(A0, B[:, :len(CORE_INPUTS)], w0, h_s) * sig[None, :]
-    Aw = Sinv[:, None] * _resonator_direction(dg, core, kx, 1.0, 0.0) * S[None, :]
-    Aq = Sinv[:, None] * _resonator_direction(dg, core, kx, 0.0, 1.0) * S[None, :]
-    idx = {name: k for k, name in enumerate(CORE_OUTPUTS)}
-
-    def lpf(block):
-        sys = block.linear_model()
-        Ph, Ga = zoh(np.asarray(sys.A), np.asarray(sys.B), h_s)
-        return Ph, Ga[:, 0]
-
-    Phi_pd, Gam_pd = lpf(pll.pd_lpf)
-    Phi_amp, Gam_amp = lpf(dg.amplitude_lpf)
-    Phi_out, Gam_out = lpf(dg.output_lpf)
-    lf = pll.loop_filter
-    base = dict(
-        Phi=expm(A0 * h_s), Gr=G.real, Gi=G.imag, Gr_w=G_w.real, Gi_w=G_w.imag, w0=w0, Nr=Nc.real, Ni=Nc.imag,
-        C_vx=C[idx["v_x"]], C_vs=C[idx["v_s"]],
-        f_free=pll.nco.f_free_Hz, k_vco=pll.nco.k_vco_Hz_per_V, pd_cos=np.cos(pll.detector.trim_rad),
-        pd_sin=np.sin(pll.detector.trim_rad), k_amp=pll.detector.k_amp,
-        Phi_pd=Phi_pd, Gam_pd=Gam_pd, kp_pll=lf.kp, ki_pll=lf.ki_per_s, v_min=lf.u_min_V, v_max=lf.u_max_V,
-        Phi_amp=Phi_amp, Gam_amp=Gam_amp, vref=dg.vref_V, kp=dg.pi.kp, ki=dg.pi.ki_per_s,
-        u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V, k_mod=dg.modulator.k_per_V, vdac=dg.vdac_V,
-        cos_ref=1.0, sin_ref=0.0, k_demod=dg.demodulator.k_per_V, Phi_out=Phi_out, Gam_out=Gam_out, h=h_s,
-    )
-    plan = OperatingPlan(base=base, phi_rate=expm_derivative(A0, Aw, h_s), phi_quad=expm_derivative(A0, Aq, h_s),
-                         k_quad_N_per_m=dg.resonator.k_quad_N_per_m, trim_rad=pll.rate_trim_rad, scale=S,
-                         steady=ss, C_x=C[idx["x"]], C_y=C[idx["y"]], A_core=A0, layout=PARAMS)
-    plan.b_vac = B[:, -1]
+    Nc = np.exp(-1j * w0 * h_s) * rotating_input(A0, B[:, :len(CORE_INPUTS)], w0, h_s) * (np.sqrt(2.0) * sig)[None, :]
+    plan.base.update(Phi=expm(A0 * h_s), Gr=G.real, Gi=G.imag, Gr_w=G_w.real, Gi_w=G_w.imag, Nr=Nc.real, Ni=Nc.imag)
     return plan
 
 
