@@ -157,7 +157,7 @@ def _advance(group: list, roll, bar) -> None:
     N_NOISE = u0.kit.model.n_inputs
     for u in group:
         u.roll = roll
-    chunks = max(1, int(round(BATCH_S / CALL_S)))
+    chunks = max(1, int(round((u0.kit.batch_s or BATCH_S) / CALL_S)))
     for k0 in range(0, n, per_call * chunks):
         k1 = min(n, k0 + per_call * chunks)
         P = np.stack([u.params(k0, k1) for u in group])

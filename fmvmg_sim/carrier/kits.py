@@ -41,6 +41,8 @@ class StepKit:
     param_rows : callable, optional
         ``(unit, k0, k1) -> rows``: the parameter rows of samples ``k0 .. k1 - 1``, when the kit makes
         them itself (default: from one plan per operating point).
+    batch_s : float, optional
+        Simulated seconds per compiled call (default: the engine's ``BATCH_S``); records do not depend on it.
     """
 
     engine: str
@@ -50,6 +52,7 @@ class StepKit:
     step_s: Callable
     channels: Callable
     param_rows: Callable | None = None
+    batch_s: float | None = None
 
 
 def _cycle_step(scn, f_ref_Hz: float) -> float:

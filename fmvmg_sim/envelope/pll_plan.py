@@ -21,6 +21,8 @@ from .pll_table import PLLEnvelopeTable
 
 #: Longest step of the PLL drive's envelope engine (s); an output interval is a whole number of steps.
 PLL_ENVELOPE_STEP_S = 50e-6
+#: Simulated seconds per compiled call of the PLL envelope (the carrier's half second is 10,000 envelope steps).
+PLL_ENVELOPE_BATCH_S = 20.0
 #: Frequency step of the central difference for the drive input's derivative in the frame's frequency (rad/s).
 _DW = 2 * np.pi * 0.5
 
@@ -146,7 +148,8 @@ def _param_rows(unit, k0: int, k1: int) -> np.ndarray:
 
 #: The PLL drive's envelope engine, for the carrier engine's roll-out.
 PLL_ENVELOPE = StepKit("envelope", PLL_ENVELOPE_MODEL, _plan, pll_envelope_initial_state, _envelope_step_s,
-                       lambda X, M, unit: pll_channels(X, M, unit, STATE, _displacement), _param_rows)
+                       lambda X, M, unit: pll_channels(X, M, unit, STATE, _displacement), _param_rows,
+                       batch_s=PLL_ENVELOPE_BATCH_S)
 
 __all__ = ["PLL_ENVELOPE", "PLL_ENVELOPE_STEP_S", "make_pll_envelope_plan", "pll_envelope_initial_state",
            "rotating_input"]
