@@ -2,10 +2,11 @@
 
 The carrier engine builds one operating point per 1 mK, which a run over tens of kelvin cannot
 afford at the envelope's speed. Here the packed parameters (and their rate and quadrature
-directions) are built on a grid of die temperatures :data:`T_GRID_K` apart, at the run's board
-offsets rounded to :data:`OFFSET_STEP_K`, and each output sample's row is their cubic (four-node
-Lagrange) interpolation at the sample's die temperature: the matrix exponentials, lock frequency
-and trims all move smoothly with temperature.
+directions) are built on a grid of die temperatures :data:`T_GRID_K` apart and board-minus-die
+offsets :data:`OFFSET_STEP_K` apart (a thermal lag puts the board off the die), and each output
+sample's row is their cubic (four-node Lagrange) interpolation in the die temperature and linear
+interpolation in the offset: the matrix exponentials, lock frequency and trims all move smoothly
+with temperature.
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ import numpy as np
 
 #: Spacing of the die-temperature grid (K).
 T_GRID_K = 2.5
-#: Board-minus-die offsets are rounded to this step (K) (zero without a thermal lag).
-OFFSET_STEP_K = 0.25
+#: Spacing of the board-minus-die offset grid (K) (a single node at zero without a thermal lag).
+OFFSET_STEP_K = 2.5
 #: Grid nodes kept across runs in one process.
 NODE_CACHE_SIZE = 256
 
@@ -75,27 +76,34 @@ class PLLEnvelopeTable:
         ndarray, shape (k, n_p)
         """
         die_C = np.asarray(die_C, dtype=float)
-        off = np.round((np.asarray(board_C, dtype=float) - die_C) / OFFSET_STEP_K) * OFFSET_STEP_K
+        opos = (np.asarray(board_C, dtype=float) - die_C) / OFFSET_STEP_K
+        j0 = np.floor(opos).astype(int)
+        wo = opos - j0
         pos = die_C / T_GRID_K
         i0 = np.floor(pos).astype(int)
         W = _lagrange_weights(pos - i0)
         out = None
-        for (i, o) in set(zip(i0.tolist(), off.tolist())):
-            sel = np.flatnonzero((i0 == i) & (off == o))
-            nodes = [self._node(i + d, o) for d in (-1, 0, 1, 2)]
-            layout = nodes[0][0]
-            if out is None:
-                out = np.empty((die_C.size, layout.size))
-            w = W[sel]
-            P = sum(w[:, j:j + 1] * nodes[j][1][None, :] for j in range(4))
-            phi = layout.slices["Phi"]
-            P[:, phi] += sum(w[:, j:j + 1] * (rate_rad_s[sel, None] * nodes[j][2][None, :]
-                                              + quad_rel[sel, None] * nodes[j][3][None, :]) for j in range(4))
-            trim = sum(w[:, j] * nodes[j][4] for j in range(4)) + phase_offset_rad[sel]
-            P[:, layout.slices["cos_ref"]] = np.cos(trim)[:, None]
-            P[:, layout.slices["sin_ref"]] = np.sin(trim)[:, None]
-            P[:, layout.slices["vref"]] *= vref_factor[sel, None]
-            out[sel] = P
+        for (i, j) in set(zip(i0.tolist(), j0.tolist())):
+            sel = np.flatnonzero((i0 == i) & (j0 == j))
+            for jj, wj in ((j, 1.0 - wo[sel]), (j + 1, wo[sel])):
+                if not np.any(wj):
+                    continue
+                nodes = [self._node(i + d, jj * OFFSET_STEP_K) for d in (-1, 0, 1, 2)]
+                layout = nodes[0][0]
+                if out is None:
+                    out = np.zeros((die_C.size, layout.size))
+                    trim_out = np.zeros(die_C.size)
+                w = W[sel] * wj[:, None]
+                P = sum(w[:, k:k + 1] * nodes[k][1][None, :] for k in range(4))
+                P[:, layout.slices["Phi"]] += sum(w[:, k:k + 1] * (rate_rad_s[sel, None] * nodes[k][2][None, :]
+                                                                   + quad_rel[sel, None] * nodes[k][3][None, :])
+                                                  for k in range(4))
+                out[sel] += P
+                trim_out[sel] += sum(w[:, k] * nodes[k][4] for k in range(4))
+        trim = trim_out + phase_offset_rad
+        out[:, layout.slices["cos_ref"]] = np.cos(trim)[:, None]
+        out[:, layout.slices["sin_ref"]] = np.sin(trim)[:, None]
+        out[:, layout.slices["vref"]] *= vref_factor[:, None]
         return out
 
 
