@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from scipy.interpolate import CubicSpline
+
 from ..analysis.allan import allan_deviation
+from ..effects import EffectSet
 from ..carrier.engine import run_carrier
 from ..envelope.engine import run_envelope
 from ..pll_drive import build_pll_drive, pll_steady_state
@@ -118,9 +121,12 @@ def compare_drives(quick: bool = False, log=print) -> dict:
         res = run_envelope(scn, progress=not quick)
         keep = res.time_s > 10.0
         dev = scn.device
-        T_die = np.asarray(res.internal["die_temperature_C"])
+        # the die temperature at each sample's middle: the frequency channel is a mean over the sample
+        t_mid = res.time_s - 0.5 / scn.settings["scenario"]["output_rate_Hz"]
+        fx = EffectSet(scn.effects)
+        T_die = np.asarray(fx.die_temperature(t_mid, np.asarray(scn.temperature(t_mid), dtype=float)))
         grid = np.linspace(T_die.min() - 1, T_die.max() + 1, 64)
-        f_res = np.interp(T_die, grid, [dev.at(T)["mechanics"]["f_drive_Hz"] for T in grid])
+        f_res = CubicSpline(grid, [dev.at(T)["mechanics"]["f_drive_Hz"] for T in grid])(T_die)
         df_all = np.asarray(res["drive_frequency_Hz"]) - f_res
         df = df_all[keep]
         amp = np.asarray(res.internal["drive_displacement_amplitude_m"])[keep]
@@ -129,7 +135,7 @@ def compare_drives(quick: bool = False, log=print) -> dict:
         fig["hold_freq_off_resonance_range_Hz"] = float(np.ptp(df_holds))
         fig["hold_freq_off_resonance_max_Hz"] = float(np.max(np.abs(df_holds)))
         if topo == "pll":  # the oscillator's lag behind its steady lock point while the oven ramps
-            lock = np.interp(T_die, grid, [pll_steady_state(build_pll_drive(dev, T)).f_Hz for T in grid])
+            lock = CubicSpline(grid, [pll_steady_state(build_pll_drive(dev, T)).f_Hz for T in grid])(T_die)
             fig["ramp_tracking_error_max_Hz"] = float(np.max(np.abs(np.asarray(res["drive_frequency_Hz"]) - lock)[keep]))
         Ts, bs = hold_means(res)
         slope, icpt = np.polyfit(Ts, bs, 1)
