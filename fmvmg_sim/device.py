@@ -22,6 +22,7 @@ from .errors import InputError
 from .paths import scenarios_dir
 from .schema import Bool, Choice, Num, Text, validate_tree
 from .tomlio import load_toml
+from .pll_config import DRIVE_TOPOLOGIES, PLL_SCHEMA, check_pll_values, pll_at
 from .uncertainty import TOLERANCE_SCHEMA
 
 _AMP = {"gain": Num(), "gbw_Hz": Num(positive=True), "gbw_tc_per_K": Num(-0.05, 0.05),
@@ -75,6 +76,9 @@ DEVICE_SCHEMA = {
                       "kp": Num(lo=0), "ki_per_s": Num(positive=True), "kd_s": Num(lo=0)},
         "quadrature_control": {"enabled": Bool(), "dk_dV_N_per_m_per_V": Num(positive=True),
                                "filter_f_c_Hz": Num(positive=True), "kp": Num(lo=0), "ki_per_s": Num(positive=True)},
+        # the drive loop's topology and, for a PLL drive, its electronics (fmvmg_sim.pll_drive)
+        "drive": {"topology": Choice(DRIVE_TOPOLOGIES)},
+        "pll": PLL_SCHEMA,
     },
     "noise": {
         "sense_input_V_per_sqrtHz": Num(lo=0), "drive_input_V_per_sqrtHz": Num(lo=0),
@@ -89,7 +93,7 @@ DEVICE_SCHEMA = {
 OPTIONAL_KEYS = {"mechanics.duffing_k3_rel", "thermal.q_extra_tc_per_K", "thermal.split_extra_Hz_per_K",
                  "thermal.q_curvature_per_K2",
                  "circuit.sense_pickoff.c_feedthrough_tc_per_K", "circuit.demodulator.phase_tc_rad_per_K",
-                 "circuit.sense", "circuit.rebalance", "circuit.quadrature_control"}
+                 "circuit.sense", "circuit.rebalance", "circuit.quadrature_control", "circuit.drive", "circuit.pll"}
 
 DEVICES_DIR = scenarios_dir() / "devices"
 
@@ -167,6 +171,11 @@ class Device:
         return float(self.values["reference_temperature_C"])
 
     @property
+    def drive_topology(self) -> str:
+        """The drive loop: ``"self-oscillating"`` (the phase-shifter loop, the default) or ``"pll"``."""
+        return self.values["circuit"].get("drive", {}).get("topology", "self-oscillating")
+
+    @property
     def content_key(self) -> str:
         """The values as canonical JSON: devices with equal values share it (derived numbers are cached under it)."""
         return json.dumps(self.values, sort_keys=True, default=repr)
@@ -190,6 +199,10 @@ class Device:
         device without effects). Computed once per device content.
         """
         from .averaged import scale_factor_V_per_dps  # imports this module through the diagram (above)
+        if self.drive_topology == "pll":
+            from .pll_drive import build_pll_drive, pll_scale_factor_V_per_dps
+            return _derived(self, "nominal_scale_factor_V_per_dps", lambda: pll_scale_factor_V_per_dps(
+                build_pll_drive(self, self.reference_temperature_C, dg=self.reference_diagram)))
         return _derived(self, "nominal_scale_factor_V_per_dps",
                         lambda: scale_factor_V_per_dps(self.reference_diagram))
 
@@ -210,6 +223,7 @@ class Device:
         checked = validate_tree(overrides, DEVICE_SCHEMA, where, prefix="device.")
         merged = copy.deepcopy(self.values)
         _merge(merged, checked)
+        check_pll_values(merged, where)
         return Device(merged, self.path)
 
     def at(self, temperature_C: float, board_C: float | None = None) -> OperatingPoint:
@@ -282,6 +296,8 @@ class Device:
             "output_lpf": dict(ci["output_lpf"]),
         }
         circ.update({k: dict(ci[k]) for k in ("sense", "rebalance", "quadrature_control") if k in ci})
+        if self.drive_topology == "pll":  # the PLL's oscillator and loop filter, on the board
+            circ["pll"] = pll_at(ci.get("pll", {}), me["f_drive_Hz"], dTb)
         return OperatingPoint(float(temperature_C), {
             "mechanics": mech, "circuit": circ, "noise": dict(v["noise"]), "delta_T_K": dT,
             "board_delta_T_K": dTb,
@@ -364,6 +380,7 @@ def load_device(path: str | Path) -> Device:
     missing = _missing(values, DEVICE_SCHEMA)
     if missing:
         raise InputError(f"missing key(s) {missing}", str(path))
+    check_pll_values(values, str(path))
     return Device(values, str(p))
 
 

@@ -105,7 +105,7 @@ class Diagram:
         return 2 * np.pi * self.resonator.f_drive_Hz
 
     def core_system(self, g: float, rate_rad_s: float = 0.0, k_drive_extra_N_per_m: float = 0.0,
-                    dk_quad_N_per_m: float = 0.0) -> control.StateSpace:
+                    dk_quad_N_per_m: float = 0.0, v_ac_input: bool = False) -> control.StateSpace:
         """The linear core for modulator gain ``g`` (v_ac = g v_ps) and rate ``rate_rad_s``.
 
         Parameters
@@ -118,11 +118,14 @@ class Diagram:
             Extra drive stiffness (Duffing describing function).
         dk_quad_N_per_m : float, optional
             Extra quadrature stiffness.
+        v_ac_input : bool, optional
+            Add an input ``v_ac`` summed into the modulator's output (after the inputs
+            :data:`CORE_INPUTS`): the drive voltage of a PLL drive, with ``g = 0``.
 
         Returns
         -------
         control.StateSpace
-            Inputs :data:`CORE_INPUTS`, outputs :data:`CORE_OUTPUTS`.
+            Inputs :data:`CORE_INPUTS` (and ``v_ac``), outputs :data:`CORE_OUTPUTS`.
         """
         res = self.resonator.linear_model()
         A = self.resonator.state_matrix(rate_rad_s, k_drive_extra_N_per_m)
@@ -132,8 +135,8 @@ class Diagram:
             A[3, 0] -= dk_quad_N_per_m / self.resonator.m_sense_kg
         res = control.ss(A, res.B, res.C, res.D, name="resonator", inputs=list(res.input_labels),
                          outputs=list(res.output_labels), states=list(res.state_labels))
-        gain_blk = control.ss(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), [[g]], name="mod",
-                              inputs=["in"], outputs=["out"])
+        gain_blk = control.ss(np.zeros((0, 0)), np.zeros((0, 2)), np.zeros((1, 0)), [[g, 1.0]], name="mod",
+                              inputs=["in", "ext"], outputs=["out"])
         fx = control.ss(np.zeros((0, 0)), np.zeros((0, 2)), np.zeros((1, 0)), [[1.0, 1.0]], name="fx_sum",
                         inputs=["comb", "ext"], outputs=["out"])
         systems = [res, self.drive_pickoff.linear_model(), self.drive_noise_sum.linear_model(),
@@ -152,8 +155,9 @@ class Diagram:
         ]
         return control.interconnect(
             systems, connections=conn, name="core",
-            inplist=["fx_sum.ext", "resonator.F_y", "drive_noise_sum.in1", "sense_noise_sum.in1"],
-            inputs=list(CORE_INPUTS),
+            inplist=["fx_sum.ext", "resonator.F_y", "drive_noise_sum.in1", "sense_noise_sum.in1"]
+            + (["mod.ext"] if v_ac_input else []),
+            inputs=list(CORE_INPUTS) + (["v_ac"] if v_ac_input else []),
             outlist=["drive_amp.out", "phase_shifter.out", "sense_amp2.out", "resonator.x", "resonator.y", "mod.out"],
             outputs=list(CORE_OUTPUTS), check_unused=False)
 

@@ -7,6 +7,7 @@ import numpy as np
 from . import thermal_laws as law
 from .averaged import scale_factor_V_per_dps, steady_state
 from .diagram import build_diagram
+from .pll_drive import build_pll_drive, pll_scale_factor_V_per_dps, pll_steady_state
 from .effects import EffectSet
 from .result import SimResult
 from .errors import InputError
@@ -100,6 +101,32 @@ def vref_profile_V(scn: Scenario, t_s: np.ndarray, temperature_C: np.ndarray) ->
     return law.linear_tc(ref["vref_V"], dT, ref["vref_tc_per_K"]) * np.asarray(scn.vref_factor(t_s))
 
 
+def pll_predictions(device, die_C: float, board_C: float) -> dict:
+    """The locked PLL drive's steady state, as :func:`predictions` gives the self-oscillating loop's.
+
+    ``loop_phase_error_rad`` is the phase by which the lock point sits off the drive resonance,
+    ``atan(2 Q (f - f_d) / f_d)``.
+
+    Parameters
+    ----------
+    device : Device
+    die_C, board_C : float
+        Die and board temperatures.
+
+    Returns
+    -------
+    dict
+    """
+    pll = build_pll_drive(device, die_C, board_C=board_C)
+    ss = pll_steady_state(pll)
+    sf = pll_scale_factor_V_per_dps(pll)
+    res = pll.dg.resonator
+    phase = float(np.arctan(2 * res.q_drive * (ss.f_Hz - res.f_drive_Hz) / res.f_drive_Hz))
+    return dict(temperature_C=float(board_C), drive_frequency_Hz=ss.f_Hz, drive_amplitude_m=ss.amplitude_m,
+                agc_effort_V=ss.agc_effort_V, scale_factor_V_per_dps=sf, zero_rate_bias_dps=ss.rate_V / sf,
+                loop_phase_error_rad=phase, quadrature_V=ss.quadrature_V)
+
+
 def predictions(scn: Scenario, temperature_C: float) -> dict:
     """Analytic (averaged-model) steady state after a long hold at the sensor temperature ``temperature_C``.
 
@@ -117,6 +144,8 @@ def predictions(scn: Scenario, temperature_C: float) -> dict:
     dict
     """
     die_C = EffectSet(scn.effects).settled_die_temperature(temperature_C)
+    if scn.device.drive_topology == "pll":
+        return pll_predictions(scn.device, die_C, temperature_C)
     dg = build_diagram(scn.device, die_C, board_C=temperature_C)
     ss = steady_state(dg)
     sf = scale_factor_V_per_dps(dg)

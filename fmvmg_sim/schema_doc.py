@@ -15,7 +15,7 @@ from .uncertainty import KNOBS
 #: Unit suffixes of key names, longest first where one ends another.
 UNIT_SUFFIXES = [
     ("_dps_per_sqrt_s", "deg/s/sqrt(s)"), ("_V_per_sqrtHz", "V/sqrt(Hz)"), ("_rad_per_K", "rad/K"),
-    ("_mrad", "mrad"), ("_V_per_K", "V/K"), ("_Hz_per_K", "Hz/K"), ("_F_per_m", "F/m"), ("_N_per_m3", "N/m^3"),
+    ("_mrad", "mrad"), ("_V_per_K", "V/K"), ("_Hz_per_K", "Hz/K"), ("_Hz_per_V", "Hz/V"), ("_F_per_m", "F/m"), ("_N_per_m3", "N/m^3"),
     ("_N_per_m", "N/m"), ("_per_K2", "1/K^2"), ("_per_K", "1/K"), ("_per_s", "1/s"), ("_per_V", "1/V"),
     ("_dps2", "(deg/s)^2"), ("_rad2", "rad^2"), ("_dps", "deg/s"), ("_Hz", "Hz"), ("_kg", "kg"), ("_rad", "rad"),
     ("_V", "V"), ("_F", "F"), ("_C", "degC"), ("_s", "s"), ("_m", "m"),
@@ -128,6 +128,20 @@ MEANINGS = {
     "circuit.quadrature_control.filter_f_c_Hz": "corner of the quadrature loop's demodulation low-pass (two 2nd-order sections)",
     "circuit.quadrature_control.kp": "quadrature-loop proportional gain (>= 0)",
     "circuit.quadrature_control.ki_per_s": "quadrature-loop integral gain (> 0)",
+    "circuit.drive.topology": "drive loop: `self-oscillating` (paper 000's phase-shifter loop, the default) or `pll` "
+                              "(docs/model.md, PLL drive)",
+    "circuit.pll.f_free_offset_Hz": "PLL oscillator's free-running frequency above the drive resonance at the "
+                                    "reference temperature (default 0)",
+    "circuit.pll.f_free_tc_per_K": "its temperature coefficient, at the board temperature (default 0: a crystal-clocked NCO)",
+    "circuit.pll.k_vco_Hz_per_V": "oscillator tuning gain, > 0 (default 50)",
+    "circuit.pll.k_vco_tc_per_K": "its temperature coefficient, at the board temperature (default 0)",
+    "circuit.pll.kp": "PLL loop filter's proportional gain, V/V (default 1)",
+    "circuit.pll.ki_per_s": "its integral gain (default 60)",
+    "circuit.pll.v_min_V": "tuning range, lower end (default -10)",
+    "circuit.pll.v_max_V": "tuning range, upper end (default 10)",
+    "circuit.pll.pd_lpf_f_c_Hz": "phase detector's low-pass corner, 2nd order (default 2000)",
+    "circuit.pll.pd_trim": "phase detector's reference trim in rad, or `auto`: the drive chain's phase at the "
+                           "reference temperature (default)",
     "noise.sense_input_V_per_sqrtHz": "white noise density at the sense front end",
     "noise.drive_input_V_per_sqrtHz": "white noise density at the drive front end",
     "noise.flicker_phase_rad2": "1/f demodulation-phase noise coefficient",
@@ -313,6 +327,8 @@ def markdown() -> str:
             for part in key.split("."):
                 node = node.get(part) if isinstance(node, dict) else None
             value = "0 (optional)" if node is None and key in OPTIONAL_KEYS else _fmt(node)
+            if node is None and key.rsplit(".", 1)[0] in OPTIONAL_KEYS:  # a key of an optional table
+                value = "(optional)"
             unit = "-" if type(spec).__name__ != "Num" else unit_of(key)
             lines.append(_row(f"`{key.rsplit('.', 1)[-1]}`", accepted(spec), unit, value, MEANINGS[key]))
         lines.append("")

@@ -12,6 +12,7 @@ import pytest
 
 from fmvmg_sim.averaged import bias_temperature_coefficients_dph_per_K, steady_state
 from fmvmg_sim.carrier import engine as carrier_engine
+from fmvmg_sim.carrier import kits as carrier_kits
 from fmvmg_sim.carrier.engine import run_carrier
 from fmvmg_sim.device import BOARD_LAWS, load_device
 from fmvmg_sim.diagram import build_diagram
@@ -82,7 +83,7 @@ def test_records_without_thermal_lag_are_unchanged(monkeypatch):
     for tag in ("board", "one"):
         with monkeypatch.context() as m:
             if tag == "one":
-                m.setattr(carrier_engine, "build_diagram", _without_board(carrier_engine.build_diagram))
+                m.setattr(carrier_kits, "build_diagram", _without_board(carrier_kits.build_diagram))
                 m.setattr(envelope_engine, "build_diagram", _without_board(envelope_engine.build_diagram))
             m.setattr(carrier_engine, "_PLANS", OrderedDict())  # no operating point from the other run
             path = REPO / "scenarios" / "oven_000.toml"

@@ -24,13 +24,11 @@ from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from ..compiled import load_rollout
-from ..diagram import build_diagram
 from ..effects import EffectSet
 from ..result import SimResult, engine_result
 from ..scenario import Scenario
 from ..slow_noise import draw_slow_noises
-from .rebalance import loop_initial_state, loop_plan, model_for
-from .step import N_NOISE, STATE
+from .kits import StepKit, kit_for
 
 #: Temperatures are rounded to this step (K) when caching discretised operating points.
 T_QUANTUM_K = 1e-3
@@ -46,10 +44,6 @@ PLAN_CACHE_SIZE = 512
 _PLANS: OrderedDict = OrderedDict()
 
 
-def _state(X, name):
-    return X[:, STATE.slices[name]]
-
-
 def _one_blas_thread():
     """A context pinning the BLAS libraries to one thread (the plans' matrices are 2x2 to 16x16).
 
@@ -62,15 +56,16 @@ def _one_blas_thread():
 class _Unit:
     """One scenario's inputs, operating points, state and generator, prepared for the roll-out."""
 
-    def __init__(self, scn: Scenario):
+    def __init__(self, scn: Scenario, kit: StepKit | None = None):
         self.scn = scn
+        self.kit = kit = kit or kit_for(scn.device, "carrier")
         self.wall0 = time.perf_counter()
         dev = self.dev = scn.device
         st = scn.settings["scenario"]
         ref = self.ref = dev.reference_diagram
         self.f_ref = ref.resonator.f_drive_Hz
         self.spc = int(st["steps_per_cycle"])
-        h = self.h = 1.0 / (self.spc * self.f_ref)
+        h = self.h = kit.step_s(scn, self.f_ref)
         M = self.M = max(1, int(round(1.0 / (st["output_rate_Hz"] * h))))
         self.dt_out = dt_out = M * h
         n = self.n = int(np.ceil(scn.duration_s / dt_out - 1e-9))
@@ -90,7 +85,6 @@ class _Unit:
         self.noise_on = {"brownian": nz["brownian"], "electronic": nz["electronic"]}
         self.any_noise = nz["brownian"] or nz["electronic"]
         self.scale = ref.core_state_scale()
-        self.model = model_for(ref)  # with the closed sense loops' states when the device has them
         # operating points, cached per 1 mK of die and of board temperature
         self.keys = np.round(temp / T_QUANTUM_K) * T_QUANTUM_K
         self.board_keys = np.round(board / T_QUANTUM_K) * T_QUANTUM_K
@@ -98,9 +92,9 @@ class _Unit:
         self._device_id = dev.content_key
         self.per_call = max(1, int(round(CALL_S / dt_out)))
         p0 = self.plan_for(self.keys[0], self.board_keys[0])
-        self.x = loop_initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
-                                    from_steady=scn.settings["initial"]["state"] == "steady")
-        self.X = np.empty((n, self.model.state.size))
+        self.x = kit.initial_state(p0, scn.settings["initial"]["drive_displacement_m"],
+                                   from_steady=scn.settings["initial"]["state"] == "steady")
+        self.X = np.empty((n, kit.model.state.size))
 
     def plan_for(self, key, board_key):
         """The operating plan at die temperature ``key`` and board temperature ``board_key`` (both rounded)."""
@@ -110,8 +104,7 @@ class _Unit:
             plan = _PLANS.get(ck)
             if plan is None:
                 with _one_blas_thread():
-                    plan = loop_plan(build_diagram(self.dev, key[0], board_C=key[1]), self.h, self.noise_on,
-                                     self.scale)
+                    plan = self.kit.make_plan(self.dev, key[0], key[1], self.h, self.noise_on, self.scale)
                 _PLANS[ck] = plan
                 while len(_PLANS) > PLAN_CACHE_SIZE:
                     _PLANS.popitem(last=False)
@@ -128,7 +121,9 @@ class _Unit:
 
     def params(self, k0: int, k1: int) -> np.ndarray:
         """Parameter rows of samples ``k0 .. k1 - 1``."""
-        P = np.empty((k1 - k0, self.model.params.size))
+        if self.kit.param_rows is not None:
+            return self.kit.param_rows(self, k0, k1)
+        P = np.empty((k1 - k0, self.kit.model.params.size))
         uniq, inv = self.operating_points(k0, k1)
         for j, (key, board_key) in enumerate(uniq):
             rows = np.flatnonzero(inv == j)
@@ -139,28 +134,15 @@ class _Unit:
 
     def result(self, roll) -> SimResult:
         """The record channels of the finished roll-out."""
-        X, M, n = self.X, self.M, self.n
-        ncross, tlast = _state(X, "ncross")[:, 0], _state(X, "tlast")[:, 0]
-        freq = np.full(n, np.nan)
-        dn = np.diff(ncross)
-        dtl = np.diff(tlast)
-        ok = (dn > 0) & (dtl > 0)
-        freq[1:][ok] = dn[ok] / dtl[ok]
-        z = _state(X, "z")
-        omega = 2 * np.pi * np.where(np.isfinite(freq), freq, self.f_ref)
-        x_m, v = z[:, 0] * self.scale[0], z[:, 1] * self.scale[1]
-        # the DAQ integrates over each output interval (integrate-and-dump, no aliasing of the white noise)
-        outputs = dict(rate_V=_state(X, "acc_rate")[:, 0] / M, quadrature_V=_state(X, "acc_quad")[:, 0] / M,
-                       drive_amplitude_V=_state(X, "acc_amp")[:, 0] / M, agc_effort_V=_state(X, "acc_u")[:, 0] / M,
-                       drive_frequency_Hz=freq)
+        X, M = self.X, self.M
+        outputs, internal = self.kit.channels(X, M, self)
         t_end = self.t_end
         case_end = np.asarray(self.scn.temperature.left_limit(t_end), dtype=float)  # over the sample
-        internal = dict(drive_displacement_amplitude_m=np.hypot(x_m, v / omega), modulator_norm=_state(X, "n")[:, 0],
-                        die_temperature_C=self.fx.die_temperature(t_end, case_end))
+        internal["die_temperature_C"] = self.fx.die_temperature(t_end, case_end)
         info = dict(step_s=self.h, output_interval_s=self.dt_out, compiled=roll.compiled, compile_s=roll.compile_s,
                     steps_per_cycle=self.spc, steps_per_sample=M, operating_points=len(self.plans),
                     phase_trim_rad=self.ref.phase_trim_rad)
-        return engine_result(self.scn, "carrier", t_end, outputs, self.slow, internal, info, self.wall0)
+        return engine_result(self.scn, self.kit.engine, t_end, outputs, self.slow, internal, info, self.wall0)
 
 
 def _advance(group: list, roll, bar) -> None:
@@ -172,9 +154,10 @@ def _advance(group: list, roll, bar) -> None:
     """
     u0 = group[0]
     n, M, per_call = u0.n, u0.M, u0.per_call
+    N_NOISE = u0.kit.model.n_inputs
     for u in group:
         u.roll = roll
-    chunks = max(1, int(round(BATCH_S / CALL_S)))
+    chunks = max(1, int(round((u0.kit.batch_s or BATCH_S) / CALL_S)))
     for k0 in range(0, n, per_call * chunks):
         k1 = min(n, k0 + per_call * chunks)
         P = np.stack([u.params(k0, k1) for u in group])
@@ -196,7 +179,8 @@ def _advance(group: list, roll, bar) -> None:
         bar.update(len(group) * (k1 - k0))
 
 
-def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=None) -> list[SimResult]:
+def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=None,
+                      kit: StepKit | None = None) -> list[SimResult]:
     """Simulate many units at carrier level, advanced together in vectorised compiled calls.
 
     Units that share the steps per output sample, the number of samples and the noise
@@ -213,6 +197,8 @@ def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=No
         Show a progress bar on stderr (default: when the runs are expected to take > 3 s).
     log : callable, optional
         One-line messages (default: stderr).
+    kit : StepKit, optional
+        The step model and its plans (default: the carrier step of each unit's drive topology).
 
     Returns
     -------
@@ -220,22 +206,25 @@ def run_carrier_units(scns: list[Scenario], progress: bool | None = None, log=No
         In the order of ``scns``.
     """
     log = log or (lambda m: sys.stderr.write(m + "\n"))
-    units = [_Unit(scn) for scn in scns]
+    units = [_Unit(scn, kit) for scn in scns]
     groups: dict = {}
     for u in units:
-        groups.setdefault((u.model.name, u.M, u.n, u.per_call, u.any_noise), []).append(u)
+        groups.setdefault((u.kit.model.name, u.M, u.n, u.per_call, u.any_noise), []).append(u)
+    rolls = {g[0].kit.model.name: load_rollout(g[0].kit.model, log) for g in groups.values()}
+    roll = next(iter(rolls.values()))
+    # a pack of lanes costs about 1.8 units' time: worth it from three units on
+    packed = {g[0].kit.model.name: load_rollout(g[0].kit.model, log, lanes=True)
+              for g in groups.values() if len(g) >= MIN_PACKED_UNITS}
     total = sum(u.n for u in units)
-    compiled = load_rollout(units[0].model, log).compiled
-    per_step_s = (100e-9 if len(units) == 1 else 60e-9) if compiled else 1e-6
+    per_step_s = (100e-9 if len(units) == 1 else 60e-9) if roll.compiled else 1e-6
     est_s = sum(u.n * u.M for u in units) * per_step_s + 0.04 * sum(
         len(u.operating_points()[0]) for u in units)
     show = progress if progress is not None else est_s > 3.0
-    desc = f"carrier {scns[0].name}" if len(units) == 1 else f"carrier x{len(units)}"
+    desc = f"{units[0].kit.engine} {scns[0].name}" if len(units) == 1 else f"carrier x{len(units)}"
     bar = tqdm(total=total, disable=not show, file=sys.stderr, unit="sample", desc=desc, mininterval=0.5)
     for group in groups.values():
-        # a pack of lanes costs about 1.8 units' time: worth it from three units on
-        roll = load_rollout(group[0].model, log, lanes=len(group) >= MIN_PACKED_UNITS)
-        _advance(group, roll, bar)
+        name = group[0].kit.model.name
+        _advance(group, packed[name] if len(group) >= MIN_PACKED_UNITS else rolls[name], bar)
     bar.close()
     return [u.result(u.roll) for u in units]
 

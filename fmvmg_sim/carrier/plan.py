@@ -45,7 +45,7 @@ class OperatingPlan:
     C_y: np.ndarray
     A_core: np.ndarray
     _packed: np.ndarray | None = None
-    #: The parameter layout (a closed sense loop's model extends :data:`PARAMS`).
+    #: The parameter layout ``base`` packs into (another step model's: the PLL drive's, a closed sense loop's).
     layout: Layout = PARAMS
 
     def params(self, rate_rad_s=0.0, phase_offset_rad=0.0, vref_factor=1.0, quad_rel=0.0) -> np.ndarray:
@@ -68,17 +68,18 @@ class OperatingPlan:
         """
         rate = np.atleast_1d(np.asarray(rate_rad_s, dtype=float))
         k = max(rate.size, np.size(phase_offset_rad), np.size(vref_factor), np.size(quad_rel))
+        layout = self.layout
         if self._packed is None:
-            self._packed = self.layout.pack(self.base)
+            self._packed = layout.pack(self.base)
         P = np.repeat(self._packed[None, :], k, axis=0)
-        P[:, PARAMS.slices["Phi"]] += np.broadcast_to(rate, (k,))[:, None] * self.phi_rate.ravel()[None, :]
+        P[:, layout.slices["Phi"]] += np.broadcast_to(rate, (k,))[:, None] * self.phi_rate.ravel()[None, :]
         dq = self.k_quad_N_per_m * np.broadcast_to(np.asarray(quad_rel, dtype=float), (k,))
         if np.any(dq):
-            P[:, PARAMS.slices["Phi"]] += dq[:, None] * self.phi_quad.ravel()[None, :]
+            P[:, layout.slices["Phi"]] += dq[:, None] * self.phi_quad.ravel()[None, :]
         ph = self.trim_rad + np.broadcast_to(np.asarray(phase_offset_rad, dtype=float), (k,))
-        P[:, PARAMS.slices["cos_ref"]] = np.cos(ph)[:, None]
-        P[:, PARAMS.slices["sin_ref"]] = np.sin(ph)[:, None]
-        P[:, PARAMS.slices["vref"]] = self.base["vref"] * np.broadcast_to(np.asarray(vref_factor, dtype=float), (k,))[:, None]
+        P[:, layout.slices["cos_ref"]] = np.cos(ph)[:, None]
+        P[:, layout.slices["sin_ref"]] = np.sin(ph)[:, None]
+        P[:, layout.slices["vref"]] = self.base["vref"] * np.broadcast_to(np.asarray(vref_factor, dtype=float), (k,))[:, None]
         return P
 
 
@@ -121,15 +122,7 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
     Phi_g = expm_derivative(A0, Ag, h_s)
     Phi_w = expm_derivative(A0, Aw, h_s)
     Phi_q = expm_derivative(A0, Aq, h_s)
-    # noise standard deviations per step (one-sided PSD S -> variance S / (2 h))
-    psd_fx, psd_fy = dg.resonator.brownian_force_psd_N2_per_Hz()
-    nz = dg.noise
-    sig = np.array([
-        np.sqrt(psd_fx / (2 * h_s)) if noise_on["brownian"] else 0.0,
-        np.sqrt(psd_fy / (2 * h_s)) if noise_on["brownian"] else 0.0,
-        nz["drive_input_V_per_sqrtHz"] / np.sqrt(2 * h_s) if noise_on["electronic"] else 0.0,
-        nz["sense_input_V_per_sqrtHz"] / np.sqrt(2 * h_s) if noise_on["electronic"] else 0.0,
-    ])
+    sig = noise_sigmas(dg, h_s, noise_on)
     idx = {name: k for k, name in enumerate(CORE_OUTPUTS)}
     off = dg.core_output_offset()
     Phi_amp, Gam_amp = zoh(np.asarray(dg.amplitude_lpf.linear_model().A), np.asarray(dg.amplitude_lpf.linear_model().B), h_s)
@@ -151,6 +144,33 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
     return OperatingPlan(base=base, phi_rate=Phi_w, phi_quad=Phi_q, k_quad_N_per_m=dg.resonator.k_quad_N_per_m,
                          trim_rad=dg.phase_trim_rad, scale=S, steady=ss,
                          C_x=C[idx["x"]], C_y=C[idx["y"]], A_core=A0)
+
+
+def noise_sigmas(dg: Diagram, h_s: float, noise_on: dict) -> np.ndarray:
+    """Standard deviations per step of the core's white-noise inputs held over a step of ``h_s``.
+
+    One-sided PSD ``S`` gives the variance ``S / (2 h)``; order: F_x and F_y Brownian forces, drive and
+    sense front-end voltages (:data:`fmvmg_sim.diagram.CORE_INPUTS` after ``F_x_ext``).
+
+    Parameters
+    ----------
+    dg : Diagram
+    h_s : float
+    noise_on : dict
+        Switches ``brownian`` and ``electronic``.
+
+    Returns
+    -------
+    ndarray
+    """
+    psd_fx, psd_fy = dg.resonator.brownian_force_psd_N2_per_Hz()
+    nz = dg.noise
+    return np.array([
+        np.sqrt(psd_fx / (2 * h_s)) if noise_on["brownian"] else 0.0,
+        np.sqrt(psd_fy / (2 * h_s)) if noise_on["brownian"] else 0.0,
+        nz["drive_input_V_per_sqrtHz"] / np.sqrt(2 * h_s) if noise_on["electronic"] else 0.0,
+        nz["sense_input_V_per_sqrtHz"] / np.sqrt(2 * h_s) if noise_on["electronic"] else 0.0,
+    ])
 
 
 def _resonator_direction(dg: Diagram, core0, kx: float, rate_rad_s: float, dk_quad_N_per_m: float) -> np.ndarray:
@@ -221,4 +241,4 @@ def initial_state(plan: OperatingPlan, drive_displacement_m: float = 10e-9, from
     return STATE.pack(x)
 
 
-__all__ = ["OperatingPlan", "make_plan", "initial_state"]
+__all__ = ["OperatingPlan", "make_plan", "initial_state", "noise_sigmas"]

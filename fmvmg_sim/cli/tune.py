@@ -15,6 +15,8 @@ from ..jsonout import strict
 from ..paths import scenarios_dir
 
 DEFAULT_SCENARIO = scenarios_dir() / "startup.toml"
+#: The PLL's target crossover when --bandwidth-Hz is not given (Hz).
+PLL_BANDWIDTH_HZ = 30.0
 
 
 def register(sub) -> None:
@@ -55,11 +57,14 @@ def register(sub) -> None:
                    help="Kp values: N points from LO to HI (default 20 200 10)")
     g.add_argument("--ki-grid", nargs=3, type=float, metavar=("LO", "HI", "N"), default=[100.0, 1500.0, 8],
                    help="Ki values (1/s): N points from LO to HI (default 100 1500 8)")
-    p.add_argument("--loop", choices=("agc", "rebalance"), default="agc",
-                   help="the loop to tune: the drive amplitude loop (default) or the force-to-rebalance sense loop "
-                        "(its margins over -40..85 C and Q_s +- --q-tolerance, checked with carrier-engine rate steps)")
+    p.add_argument("--loop", choices=("agc", "rebalance", "pll"), default="agc",
+                   help="the loop to tune: the drive amplitude loop (default), the force-to-rebalance sense loop "
+                        "(its margins over -40..85 C and Q_s +- --q-tolerance, checked with carrier-engine rate steps) "
+                        "or the PLL drive's phase loop (the scenario's device with [circuit.drive] topology = \"pll\")")
     p.add_argument("--bandwidth-Hz", type=float, default=None,
-                   help="--loop rebalance: design the gains for this integral pole (default: check the device's)")
+                   help="--loop rebalance: design the gains for this integral pole (default: check the device's); "
+                        "--loop pll: the target crossover (default 30 Hz)")
+    p.add_argument("--phase-margin-deg", type=float, default=60.0, help="--loop pll: target phase margin (default 60)")
     p.add_argument("--no-progress", action="store_true", help="no progress messages on stderr")
     p.set_defaults(func=main)
 
@@ -88,6 +93,10 @@ def _check_args(args):
     for t in args.temperatures or []:
         if not -100.0 <= t <= 200.0:
             raise InputError(f"temperature {t:g} C outside -100..200 C", "--temperatures")
+    if args.bandwidth_Hz is not None and not args.bandwidth_Hz > 0:
+        raise InputError(f"expected a positive bandwidth, got {args.bandwidth_Hz:g}", "--bandwidth-Hz")
+    if not 0 < args.phase_margin_deg < 90:
+        raise InputError(f"expected 0 < margin < 90 deg, got {args.phase_margin_deg:g}", "--phase-margin-deg")
 
 
 def main(args) -> int:
@@ -120,6 +129,8 @@ def main(args) -> int:
         return _rebalance(args, device, out, temps, log)
     if args.sweep:
         return _sweep(args, device, out, temps, log)
+    if args.loop == "pll":
+        return _tune_pll(args, device, out, temps, log)
     qt = args.q_tolerance
     spec = RobustSpec(temperatures_C=tuple(np.linspace(-40.0, 85.0, args.grid_points)),
                       q_factors=(1.0 - qt, 1.0, 1.0 + qt) if qt > 0 else (1.0,))
@@ -200,4 +211,77 @@ def _sweep(args, device, out, temps, log) -> int:
                          + (f"Kp={best['kp']:.4g} Ki={best['ki_per_s']:.4g}, worst-case settling "
                             f"{best['worst_settling_time_s'] * 1e3:.2f} ms" if best else "none") + "\n")
         sys.stdout.write(f"wrote {out}/sweep.csv, sweep.json" + ("" if args.no_plots else ", sweep_heatmap.png") + "\n")
+    return 0
+
+
+def _tune_pll(args, device, out, temps, log) -> int:
+    """``--loop pll``: the phase loop's gains, its margins over temperature and Q, checked in the envelope engine."""
+    import numpy as np
+
+    from ..errors import InputError
+    from ..output import output_folder
+    from ..record import atomic_write_text
+    from ..tuning.pll import PLL_GRID_C, check_pll_gains, design_pll_gains
+
+    if device.drive_topology != "pll":
+        device = device.with_overrides({"circuit": {"drive": {"topology": "pll"}}}, str(args.scenario))
+    if args.bandwidth_Hz is None:
+        args.bandwidth_Hz = PLL_BANDWIDTH_HZ
+    qt = args.q_tolerance
+    qf = (1.0 - qt, 1.0, 1.0 + qt) if qt > 0 else (1.0,)
+    if args.gains:
+        kp, ki = args.gains
+        design = design_pll_gains(device, args.bandwidth_Hz, args.phase_margin_deg, PLL_GRID_C, qf, log)
+        from ..tuning.pll import PLLDesign, loop_transfer, margins, _pll_at
+        rows = [dict(temperature_C=r["temperature_C"], q_factor=r["q_factor"],
+                     **margins(loop_transfer(_pll_at(device, r["temperature_C"], r["q_factor"]), kp, ki)))
+                for r in design.rows]
+        design = PLLDesign(kp, ki, args.bandwidth_Hz, args.phase_margin_deg, rows)
+    else:
+        try:
+            design = design_pll_gains(device, args.bandwidth_Hz, args.phase_margin_deg, PLL_GRID_C, qf, log)
+        except ValueError as err:
+            raise InputError(str(err), "--phase-margin-deg") from None
+    checks = []
+    if not args.no_sim:
+        for T in temps:
+            log(f"checking the gains in the envelope engine at {T:g} C")
+            c = check_pll_gains(device, design.kp, design.ki_per_s, T)
+            checks.append(dict(temperature_C=float(T), **c))
+    data = {"loop": "pll", "kp": design.kp, "ki_per_s": design.ki_per_s,
+            "target_bandwidth_Hz": design.target_bandwidth_Hz,
+            "target_phase_margin_deg": design.target_phase_margin_deg, "worst": design.worst(), "grid": design.rows,
+            "checks": [{k: v for k, v in c.items() if not isinstance(v, np.ndarray)} for c in checks],
+            "scenario": str(args.scenario)}
+    with output_folder(out, command="tune --loop pll") as tmp:
+        atomic_write_text(tmp / "tune_pll.json", json.dumps(strict(data), indent=2) + "\n")
+        if checks and not args.no_plots:
+            import matplotlib
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+            fig, ax = plt.subplots(figsize=(6, 4))
+            for c in checks:
+                line, = ax.plot(1e3 * c["t_s"], c["simulated_Hz"], label=f"{c['temperature_C']:g} C, envelope engine")
+                ax.plot(1e3 * c["t_s"], c["linear_Hz"], "--", color=line.get_color(), label="linear loop")
+            ax.set(xlabel="time (ms)", ylabel="oscillator frequency error (Hz)",
+                   title=f"PLL: Kp={design.kp:.3g}, Ki={design.ki_per_s:.3g} 1/s")
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7)
+            fig.tight_layout()
+            fig.savefig(tmp / "pll_check.png", dpi=90)
+            plt.close(fig)
+    if args.json:
+        sys.stdout.write(json.dumps(strict(data)) + "\n")
+    else:
+        w = design.worst()
+        lines = [f"PLL loop filter: Kp = {design.kp:.4g} V/V, Ki = {design.ki_per_s:.4g} 1/s "
+                 f"(target {design.target_bandwidth_Hz:g} Hz, {design.target_phase_margin_deg:g} deg)",
+                 f"over {len(design.rows)} points (-40..85 C, Q x {', '.join(f'{q:g}' for q in qf)}): crossover "
+                 f"{w['crossover_Hz_min']:.2f}..{w['crossover_Hz_max']:.2f} Hz, phase margin >= "
+                 f"{w['phase_margin_deg_min']:.1f} deg, gain margin >= {w['gain_margin_dB_min']:.1f} dB"]
+        for c in checks:
+            lines.append(f"  {c['temperature_C']:6.1f} C: 1 Hz error settles to 2 % in {1e3 * c['settling_simulated_s']:.1f} ms "
+                         f"(linear loop {1e3 * c['settling_linear_s']:.1f} ms), largest difference "
+                         f"{100 * c['max_difference_rel']:.2f} % of the error")
+        sys.stdout.write("\n".join(lines) + f"\nwrote {out}/tune_pll.json\n")
     return 0

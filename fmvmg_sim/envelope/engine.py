@@ -226,6 +226,10 @@ def run_envelope(scn: Scenario, progress: bool | None = None, log=None) -> SimRe
     -------
     SimResult
     """
+    if scn.device.drive_topology == "pll":  # the PLL drive's envelope step, through the step-kit roll-out
+        from ..carrier.engine import run_carrier_units
+        from ..carrier.kits import kit_for
+        return run_carrier_units([scn], progress=progress, log=log, kit=kit_for(scn.device, "envelope"))[0]
     log = log or (lambda m: sys.stderr.write(m + "\n"))
     wall0 = time.perf_counter()
     dev = scn.device
