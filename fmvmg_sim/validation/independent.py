@@ -209,7 +209,18 @@ def run_independent(folder: Path, scenarios: list, out: Path, cases: list | None
     return result
 
 
-def _fmt_acc(row: dict) -> str:
+def accepted_cell(row: dict) -> str:
+    """A table cell of a scored row: each accepted effect with its held-out shrink and its look-alikes.
+
+    Parameters
+    ----------
+    row : dict
+        From :func:`score_case`.
+
+    Returns
+    -------
+    str
+    """
     if row["error"]:
         return f"error: {row['error']}"
     parts = []
@@ -244,7 +255,7 @@ def format_table(result: dict) -> str:
         cells = []
         for n in names:
             r = result["scenarios"][n]["rows"][c]
-            cells += [r["verdict"] or "-", _fmt_acc(r), "yes" if r["right"] else "**no**"]
+            cells += [r["verdict"] or "-", accepted_cell(r), "yes" if r["right"] else "**no**"]
         L.append(f"| {c} | {truth} | " + " | ".join(cells) + " |")
     L += ["", "| scenario | null units 'none' | clear single effect found | all single effects found | pairs exact "
           f"| accepted with shrink below {result['shrink_floor']:g} | errors |", "|---|---|---|---|---|---|---|"]
