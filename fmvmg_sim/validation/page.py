@@ -298,10 +298,6 @@ INDEPENDENT_RECORDS = REPO / "tests" / "data" / "independent"
 DIAGNOSIS_SCENARIOS = ("nominal_a", "nominal_a_stable_electronics")
 
 
-def _truth(row: dict) -> str:
-    return ", ".join(f"{t} ({row['strength'].get(t, '?')})" for t in row["truth"]) or "none (null unit)"
-
-
 def diagnosis_records(quick: bool = False, log=print, results: str | None = None) -> Section:
     """The diagnosis on labelled records of an independent generator, with each scenario of
     :data:`DIAGNOSIS_SCENARIOS` (:mod:`.independent`).
@@ -328,21 +324,7 @@ def diagnosis_records(quick: bool = False, log=print, results: str | None = None
             res = I.run_independent(INDEPENDENT_RECORDS, [REPO / "scenarios" / f"{s}.toml" for s in scen], Path(d),
                                     n_null=2 if quick else I.N_NULL, progress=False)
     names = list(res["scenarios"])
-    rows0 = next(iter(res["scenarios"].values()))["rows"] if names else {}
-    table = []
-    for i, c in enumerate(rows0, 1):
-        cells = [str(i), _truth(rows0[c])]
-        for n in names:
-            r = res["scenarios"][n]["rows"][c]
-            cells += [r["verdict"] or "-", I.accepted_cell(r), "yes" if r["right"] else "**no**"]
-        table.append(cells)
-    head = ["record", "truth (strength)"] + [h for n in names for h in (f"{n}: verdict", "accepted (shrink) ~ "
-                                                                        "look-alikes", "right")]
-    summ = []
-    for n in names:
-        s = res["scenarios"][n]["summary"]
-        summ.append([n] + [f"{s[k]['right']} / {s[k]['cases']}" for k in ("null", "single_clear", "single", "pair")]
-                    + [str(s["accepted_below_floor"]), str(s["errors"])])
+    n_rec = len(next(iter(res["scenarios"].values()))["rows"]) if names else 0
     lines = ["`fmvmg diagnose` on labelled records of a generator this project did not write (its own laws, "
              "tolerances, channel offsets and gains, noise and effect implementations), diagnosed with each scenario "
              "and scored against the truth: a null unit is right when the verdict is `none`, a single effect when it "
@@ -352,10 +334,8 @@ def diagnosis_records(quick: bool = False, log=print, results: str | None = None
              "FOLDER --scenario nominal_a --scenario nominal_a_stable_electronics -o out/indep` and "
              "`python -m fmvmg_sim.validation.page --diagnosis-results out/indep -o docs/validation.md`; without "
              "`--diagnosis-results` the section diagnoses the records that ship in `tests/data/independent`. "
-             f"Records: {len(rows0)} (folder `{Path(res['folder']).name}`).", ""]
-    lines += _table(head, table) + [""]
-    lines += _table(["scenario", "null units 'none'", "clear single effect found", "all single effects found",
-                     "pairs exact", f"accepted with shrink below {res['shrink_floor']:g}", "errors"], summ)
+             f"Records: {n_rec} (folder `{Path(res['folder']).name}`).", ""]
+    lines += I.format_table(res, numbered=True).rstrip("\n").split("\n")
     data = {n: res["scenarios"][n]["summary"] for n in names}
     return Section("Diagnosis on records made elsewhere", lines, data)
 
