@@ -8,6 +8,10 @@ Each section is a function that measures one claim and returns its markdown and 
 is written whole or not at all, and ``--json PATH`` writes its numbers too (not kept in the repository). ``--only`` runs
 some sections and writes them to another file (a partial page is never mistaken for the whole one), and
 ``--quick`` shortens every measurement to check the machinery (its figures are not the page's).
+
+The diagnosis section (minutes per record) is left out of a default run: ``--diagnosis-results DIR`` adds it,
+tabulating a finished ``fmvmg diagnose-independent`` output folder, and ``--only diagnosis`` diagnoses the labelled
+records that ship in ``tests/data/independent``.
 """
 
 from __future__ import annotations
