@@ -45,6 +45,10 @@ FLOORS = {"rate_V": 2e-7, "quadrature_V": 2e-6, "drive_amplitude_V": 3e-7, "agc_
 ON_LATTICE_MIN = 0.9
 #: Channels read through one converter (the output quantiser acts on both).
 CONVERTER_CHANNELS = ("rate_V", "quadrature_V")
+#: Channels a loop writes (its effort, its amplitude, its frequency): their noise within a sample interval is shaped
+#: by the loop, so a block's noise is read from the block means (:func:`block_noise_sigma`). The demodulated outputs
+#: carry white noise independent from sample to sample, and their slow noise is modelled apart (Allan bands, flicker).
+LOOP_CHANNELS = ("drive_amplitude_V", "agc_effort_V", "drive_frequency_Hz")
 
 
 def difference_sigma(x: np.ndarray, empty: float = float("nan")) -> float:
@@ -348,8 +352,9 @@ class Prepared:
     def block_noise(self) -> np.ndarray:
         """Noise of each channel's block mean, scaled to one sample (sigma x sqrt(n_full)), shape (C,).
 
-        Read from the block means (:func:`block_noise_sigma`, blocks away from rate-table motion); where a
-        record is too short for that, from the samples' scatter (:meth:`white_sigma`).
+        For the channels a loop writes (:data:`LOOP_CHANNELS`), read from the block means
+        (:func:`block_noise_sigma`, blocks away from rate-table motion); for the demodulated outputs, and where
+        a record is too short for that, from the samples' scatter (:meth:`white_sigma`).
 
         Returns
         -------
@@ -361,7 +366,7 @@ class Prepared:
             t = self.block_time_s()
             out = np.array(ws, dtype=float)
             for i, c in enumerate(CHANNELS):
-                if c not in self.channels:
+                if c not in self.channels or c not in LOOP_CHANNELS:
                     continue
                 n = self.block_counts(c)
                 full = float(np.median(n[n > 0])) if np.any(n > 0) else 1.0
