@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from fmvmg_sim.diagnosis.data import block_noise_sigma, difference_sigma, prepare
+from fmvmg_sim.diagnosis.data import prepare
 from fmvmg_sim.diagnosis.fitting import transient_blocks
 from fmvmg_sim.diagnosis.forward import CHANNELS
 from fmvmg_sim.record import Record
@@ -130,71 +130,3 @@ def test_folds_are_forward_chained_with_a_gap():
     # the first fold trains on what precedes its segment and gap: 1.8 of 5 segments
     first = (N_SEGMENTS - N_FOLDS - GAP_FRACTION) / N_SEGMENTS
     assert abs(folds[0]["train"].mean() - first) < BLOCK_S / n
-
-
-def _loop_noise(n_samples, sigma, rng):
-    """Samples of a loop-filtered noise: white noise differenced (its spectrum vanishes at low frequency),
-    plus a small white share whose block means are known exactly."""
-    e = rng.normal(0.0, sigma, n_samples + 1)
-    return np.diff(e) + rng.normal(0.0, 0.01 * sigma, n_samples)
-
-
-def test_block_noise_sigma_recovers_white_block_noise_under_a_trend_and_steps():
-    rng = np.random.default_rng(3)
-    nb, sigma = 3000, 2e-6
-    t = 10.0 * np.arange(nb) + 5.0
-    trend = 1e-3 * np.sin(2 * np.pi * t / 20000.0) + 3e-8 * t   # smooth: slow against 3 blocks
-    steps = np.where(np.arange(nb) % 400 < 3, 5e-4, 0.0)        # rare fast changes (the MAD ignores them)
-    y = trend + steps + rng.normal(0.0, sigma, nb)
-    est = block_noise_sigma(y, t, np.full(nb, 10), 10.0)
-    assert abs(est / sigma - 1.0) < 0.05
-
-
-def test_block_noise_sigma_of_anticorrelated_samples_is_far_below_the_sample_scatter():
-    rng = np.random.default_rng(4)
-    n, per = 30000, 40
-    x = _loop_noise(n, 1e-3, rng)
-    t = np.arange(n) + 0.5
-    b = np.arange(n) // per
-    y = np.bincount(b, x) / per
-    tb = np.bincount(b, t) / per
-    naive = difference_sigma(x) / np.sqrt(per)
-    est = block_noise_sigma(y, tb, np.full(len(y), per), float(per))
-    # a block mean of differenced noise keeps only the noise at its two ends, (E[k+1] - E[k]) / per, shared with
-    # its neighbours: the second difference is (-E[k-1] + 3 E[k] - 3 E[k+1] + E[k+2]) / per, variance 20 sigma^2
-    # / per^2, read as 20/6; plus the white share
-    expected = np.sqrt(20.0 / 6.0 * 1e-6 / per ** 2 + (1e-5) ** 2 / per)
-    assert abs(est / expected - 1.0) < 0.1
-    assert naive / est > 5.0
-
-
-def test_block_noise_sigma_skips_gaps_partial_blocks_and_short_series():
-    rng = np.random.default_rng(5)
-    nb = 400
-    t = 10.0 * np.arange(nb) + 5.0
-    t[200:] += 35.0                                   # a drop-out between two blocks
-    y = rng.normal(0.0, 1.0, nb)
-    y[200:] += 100.0                                  # a level change hidden in the gap is never differenced
-    n = np.full(nb, 10)
-    n[50] = 4                                         # a partial block (its mean is noisier) is left out
-    y[50] = 50.0
-    assert abs(block_noise_sigma(y, t, n, 10.0) - 1.0) < 0.15
-    assert np.isnan(block_noise_sigma(y[:20], t[:20], n[:20], 10.0))
-    usable = np.zeros(nb, bool)
-    assert np.isnan(block_noise_sigma(y, t, n, 10.0, usable))
-
-
-def test_prepared_block_noise_reads_the_block_means():
-    rng = np.random.default_rng(6)
-    n = 7200
-    t = np.arange(1.0, n + 1.0)
-    agc = 0.8 + _loop_noise(n, 1e-4, rng)
-    rec = Record({"time_s": t, "temperature_C": np.full(n, 25.0), "rate_dps": rng.normal(0.0, 0.1, n),
-                  "agc_effort_V": agc}, {})
-    prep = prepare(rec, 0.01)
-    i, r = CHANNELS.index("agc_effort_V"), CHANNELS.index("rate_V")
-    bn, ws = prep.block_noise(), prep.white_sigma()
-    assert ws[i] / bn[i] > 2.5                          # the loop's anticorrelation seen, not the sample scatter
-    assert bn[r] == ws[r]                               # the demodulated output: its samples' white level
-    S = prep.block_sigma()
-    assert S[0, i] < ws[i] / np.sqrt(10.0) / 2.5

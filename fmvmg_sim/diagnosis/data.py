@@ -45,10 +45,6 @@ FLOORS = {"rate_V": 2e-7, "quadrature_V": 2e-6, "drive_amplitude_V": 3e-7, "agc_
 ON_LATTICE_MIN = 0.9
 #: Channels read through one converter (the output quantiser acts on both).
 CONVERTER_CHANNELS = ("rate_V", "quadrature_V")
-#: Channels a loop writes (its effort, its amplitude, its frequency): their noise within a sample interval is shaped
-#: by the loop, so a block's noise is read from the block means (:func:`block_noise_sigma`). The demodulated outputs
-#: carry white noise independent from sample to sample, and their slow noise is modelled apart (Allan bands, flicker).
-LOOP_CHANNELS = ("drive_amplitude_V", "agc_effort_V", "drive_frequency_Hz")
 
 
 def difference_sigma(x: np.ndarray, empty: float = float("nan")) -> float:
@@ -67,58 +63,6 @@ def difference_sigma(x: np.ndarray, empty: float = float("nan")) -> float:
     d = np.diff(np.asarray(x, dtype=float))
     d = d[np.isfinite(d)]
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2)) if d.size else empty
-
-
-#: Fewest usable triples of adjacent full blocks for :func:`block_noise_sigma` (else the sample estimate is used).
-MIN_BLOCK_TRIPLES = 30
-
-
-def block_noise_sigma(y: np.ndarray, t_s: np.ndarray, n: np.ndarray, block_s: float,
-                      usable: np.ndarray | None = None) -> float:
-    """Noise of a block mean read from the block means themselves (robust second differences).
-
-    A record's samples are means over their output intervals, and what a loop does to the noise
-    inside a block (an AGC or a frequency tracker feeding its own error back) makes successive
-    samples anticorrelated or correlated: their scatter, divided by ``sqrt(n)``, then misstates the
-    noise of a block mean by orders of magnitude. The block means do not: the second difference
-    ``y[i-1] - 2 y[i] + y[i+1]`` of three adjacent blocks cancels any trend linear over ``3 block_s``
-    and has variance ``6 sigma**2`` for independent block noise ``sigma``; its median absolute
-    deviation ignores the few blocks where the signal bends faster (a ramp's corner, a step). For
-    noise with a flicker share the value is the noise at the block length (what a block's weight
-    must carry), close to the Allan deviation at ``block_s``.
-
-    Parameters
-    ----------
-    y : ndarray
-        Block means (NaN where a block has no sample).
-    t_s : ndarray
-        Block times (s); only triples of blocks ``block_s`` apart are used (a gap breaks a triple).
-    n : ndarray
-        Samples in each block; only full blocks (the most common count) are used.
-    block_s : float
-        Block length (s).
-    usable : ndarray of bool, optional
-        Blocks the statistic may use (e.g. away from rate-table motion).
-
-    Returns
-    -------
-    float
-        The noise of a full block's mean; NaN when fewer than :data:`MIN_BLOCK_TRIPLES` triples
-        are usable.
-    """
-    y, t, n = (np.asarray(a, dtype=float) for a in (y, t_s, n))
-    if len(y) < 3:
-        return float("nan")
-    ok = np.isfinite(y) & (n == np.median(n[n > 0])) if np.any(n > 0) else np.zeros(len(y), bool)
-    if usable is not None:
-        ok &= np.asarray(usable, bool)
-    dt = np.diff(t)
-    adj = np.abs(dt - block_s) < 0.01 * block_s
-    use = ok[:-2] & ok[1:-1] & ok[2:] & adj[:-1] & adj[1:]
-    if use.sum() < MIN_BLOCK_TRIPLES:
-        return float("nan")
-    d2 = (y[:-2] - 2.0 * y[1:-1] + y[2:])[use]
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
 
 
 def lattice_lsb(x_V: np.ndarray) -> tuple[float, float]:
@@ -349,49 +293,21 @@ class Prepared:
         out[q] = L[q] / np.sqrt(12.0) * np.exp(-2.0 * np.pi ** 2 * ws[q] ** 2 / L[q] ** 2)
         return out
 
-    def block_noise(self) -> np.ndarray:
-        """Noise of each channel's block mean, scaled to one sample (sigma x sqrt(n_full)), shape (C,).
-
-        For the channels a loop writes (:data:`LOOP_CHANNELS`), read from the block means
-        (:func:`block_noise_sigma`, blocks away from rate-table motion); for the demodulated outputs, and where
-        a record is too short for that, from the samples' scatter (:meth:`white_sigma`).
-
-        Returns
-        -------
-        ndarray
-        """
-        if "bnoise" not in self._cache:
-            ws = self.white_sigma()
-            static = self.block_mean(self.static_rate_samples().astype(float)) >= 1.0
-            t = self.block_time_s()
-            out = np.array(ws, dtype=float)
-            for i, c in enumerate(CHANNELS):
-                if c not in self.channels or c not in LOOP_CHANNELS:
-                    continue
-                n = self.block_counts(c)
-                full = float(np.median(n[n > 0])) if np.any(n > 0) else 1.0
-                block_s = self.sample_interval_s * full
-                b = block_noise_sigma(self.block_mean(self.obs[c]), t, n, block_s, static)
-                if np.isfinite(b):
-                    out[i] = b * np.sqrt(full)
-            self._cache["bnoise"] = out
-        return self._cache["bnoise"]
-
     def block_sigma(self) -> np.ndarray:
-        """Noise level of each block mean (:meth:`block_noise` / sqrt(n)) combined with the model and recorder floors.
+        """Noise level of each block mean: white level / sqrt(n) combined with the model and recorder floors.
 
         Returns
         -------
         ndarray, shape (n_blocks, C)
         """
         if "bsig" not in self._cache:
-            bn = self.block_noise()
+            ws = self.white_sigma()
             qf = self.quantization_floor()
             S = np.full((self.n_blocks, len(CHANNELS)), np.nan)
             for i, c in enumerate(CHANNELS):
                 if c in self.channels:
                     n = np.maximum(self.block_counts(c), 1)
-                    S[:, i] = np.sqrt(bn[i] ** 2 / n + FLOORS[c] ** 2 + qf[i] ** 2)
+                    S[:, i] = np.sqrt(ws[i] ** 2 / n + FLOORS[c] ** 2 + qf[i] ** 2)
             self._cache["bsig"] = S
         return self._cache["bsig"]
 
