@@ -132,7 +132,8 @@ KNOBS: tuple[Knob, ...] = (
     _k("agc_effort_offset_V", "channel", "offset", [("agc_effort_V",)], 1e-4, "AGC-effort channel offset"),
     _k("agc_effort_gain_rel", "channel", "gain", [("agc_effort_V",)], 1e-4, "AGC-effort channel gain, relative"),
     _k("agc_effort_tc_per_K", "channel", "gain_tc", [("agc_effort_V",)], 1e-6,
-       "AGC-effort channel gain temperature coefficient (the PI stage and its acquisition)"),
+       "AGC-effort gain temperature coefficient between the drive force and the record (the PI stage, its "
+       "acquisition, the drive's references VDC and Vdac)"),
     _k("drive_frequency_offset_Hz", "channel", "offset", [("drive_frequency_Hz",)], 1e-3,
        "drive-frequency channel offset"),
     _k("drive_frequency_gain_rel", "channel", "gain", [("drive_frequency_Hz",)], 1e-7,

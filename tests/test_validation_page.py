@@ -5,6 +5,7 @@ import json
 import pytest
 
 from fmvmg_sim.validation import page
+from fmvmg_sim.validation.independent import score_case, summary
 
 
 def test_a_section_is_measured_and_written_with_its_numbers(tmp_path):
@@ -32,3 +33,24 @@ def test_the_compensation_section_holds_the_default_method_to_the_better_baselin
     assert sec.data["default_within_1p05_of_best"] == sec.data["pairs"]
     text = "\n".join(sec.lines)
     assert "| record | fitted -> applied |" in text and ("line wins" in text) == (sec.data["line_wins"] > 0)
+
+
+def test_the_diagnosis_section_tabulates_a_finished_run_without_its_record_names(tmp_path):
+    """The opt-in diagnosis section reads a harness output folder, numbers the records (no file names on the page)
+    and carries each scenario's rates; a default page leaves it out, and a folder without scores is refused."""
+    rows = {"rec_a": score_case({"effects": {}}, {"verdict": "none", "accepted": [], "ambiguous_with": {},
+                                                   "ranked": [], "rules_fired": []}),
+            "rec_b": score_case({"effects": {"duffing": {}}, "strength": {"duffing": "clear"}},
+                                {"verdict": "explained", "accepted": ["duffing"], "ambiguous_with": {},
+                                 "ranked": [{"effect": "duffing", "shrink": 0.7}], "rules_fired": []})}
+    res = {"folder": "/somewhere/records", "shrink_floor": 0.2,
+           "scenarios": {"nominal_a": {"rows": rows, "summary": summary(rows)}}}
+    (tmp_path / "scores.json").write_text(json.dumps(res))
+    out = tmp_path / "v.md"
+    assert page.main(["--only", "diagnosis", "--diagnosis-results", str(tmp_path), "-o", str(out)]) == 0
+    md = out.read_text()
+    assert "| 2 | duffing (clear) | explained | duffing (0.70) | yes |" in md
+    assert "| nominal_a | 1 / 1 | 1 / 1 | 1 / 1 | 0 / 0 | 0 | 0 |" in md
+    assert "rec_a" not in md and "rec_b" not in md
+    assert "diagnosis" in page.OPT_IN
+    assert page.main(["--diagnosis-results", str(tmp_path / "nothing"), "-o", str(out)]) == 2

@@ -209,7 +209,18 @@ def run_independent(folder: Path, scenarios: list, out: Path, cases: list | None
     return result
 
 
-def _fmt_acc(row: dict) -> str:
+def accepted_cell(row: dict) -> str:
+    """A table cell of a scored row: each accepted effect with its held-out shrink and its look-alikes.
+
+    Parameters
+    ----------
+    row : dict
+        From :func:`score_case`.
+
+    Returns
+    -------
+    str
+    """
     if row["error"]:
         return f"error: {row['error']}"
     parts = []
@@ -220,7 +231,7 @@ def _fmt_acc(row: dict) -> str:
     return "; ".join(parts) or "-"
 
 
-def format_table(result: dict) -> str:
+def format_table(result: dict, numbered: bool = False) -> str:
     """The Markdown table of a run: one row per record, per scenario its verdict, accepted effects (held-out
     shrink, look-alikes) and whether it is right, then the rates.
 
@@ -228,6 +239,8 @@ def format_table(result: dict) -> str:
     ----------
     result : dict
         From :func:`run_independent`.
+    numbered : bool, optional
+        Rows numbered 1, 2, ... instead of named by their record.
 
     Returns
     -------
@@ -238,14 +251,14 @@ def format_table(result: dict) -> str:
     head = "| record | truth (strength) | " + " | ".join(f"{n}: verdict | accepted (shrink) ~ look-alikes | right"
                                                           for n in names) + " |"
     L = [head, "|" + "---|" * (2 + 3 * len(names))]
-    for c in cases:
+    for i, c in enumerate(cases, 1):
         r0 = result["scenarios"][names[0]]["rows"][c]
         truth = ", ".join(f"{t} ({r0['strength'].get(t, '?')})" for t in r0["truth"]) or "none (null unit)"
         cells = []
         for n in names:
             r = result["scenarios"][n]["rows"][c]
-            cells += [r["verdict"] or "-", _fmt_acc(r), "yes" if r["right"] else "**no**"]
-        L.append(f"| {c} | {truth} | " + " | ".join(cells) + " |")
+            cells += [r["verdict"] or "-", accepted_cell(r), "yes" if r["right"] else "**no**"]
+        L.append(f"| {i if numbered else c} | {truth} | " + " | ".join(cells) + " |")
     L += ["", "| scenario | null units 'none' | clear single effect found | all single effects found | pairs exact "
           f"| accepted with shrink below {result['shrink_floor']:g} | errors |", "|---|---|---|---|---|---|---|"]
     for n in names:

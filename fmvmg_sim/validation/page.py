@@ -8,6 +8,10 @@ Each section is a function that measures one claim and returns its markdown and 
 is written whole or not at all, and ``--json PATH`` writes its numbers too (not kept in the repository). ``--only`` runs
 some sections and writes them to another file (a partial page is never mistaken for the whole one), and
 ``--quick`` shortens every measurement to check the machinery (its figures are not the page's).
+
+The diagnosis section (minutes per record) is left out of a default run: ``--diagnosis-results DIR`` adds it,
+tabulating a finished ``fmvmg diagnose-independent`` output folder, and ``--only diagnosis`` diagnoses the labelled
+records that ship in ``tests/data/independent``.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from ..jsonout import strict
 from ..record import atomic_write_text
 from ..scenario import load_scenario
 from . import compensation_records as R
+from . import independent as I
 
 #: The source checkout this module sits in; its tests/data holds the outside reference data.
 REPO = Path(__file__).resolve().parents[2]
@@ -290,41 +295,100 @@ def compensation_records(quick: bool = False, log=print) -> Section:
     return Section("Compensation on measured records", lines, data)
 
 
+#: Labelled records made elsewhere that ship with the source (the diagnosis section's default).
+INDEPENDENT_RECORDS = REPO / "tests" / "data" / "independent"
+#: The scenarios the diagnosis section scores: the physics brief's nominal model, and one stating the independent
+#: generator's nominal laws.
+DIAGNOSIS_SCENARIOS = ("nominal_a", "nominal_a_stable_electronics")
+
+
+def diagnosis_records(quick: bool = False, log=print, results: str | None = None) -> Section:
+    """The diagnosis on labelled records of an independent generator, with each scenario of
+    :data:`DIAGNOSIS_SCENARIOS` (:mod:`.independent`).
+
+    Parameters
+    ----------
+    quick : bool, optional
+        One scenario, two null re-simulations.
+    log : callable, optional
+    results : str, optional
+        A finished ``fmvmg diagnose-independent`` output folder (its ``scores.json``) to tabulate instead of
+        diagnosing the shipped records again.
+
+    Returns
+    -------
+    Section
+    """
+    if results is not None:
+        res = json.loads((Path(results) / "scores.json").read_text())
+    else:
+        scen = DIAGNOSIS_SCENARIOS[:1] if quick else DIAGNOSIS_SCENARIOS
+        log(f"diagnosis: {INDEPENDENT_RECORDS} against {', '.join(scen)}")
+        with tempfile.TemporaryDirectory() as d:
+            res = I.run_independent(INDEPENDENT_RECORDS, [REPO / "scenarios" / f"{s}.toml" for s in scen], Path(d),
+                                    n_null=2 if quick else I.N_NULL, progress=False)
+    names = list(res["scenarios"])
+    n_rec = len(next(iter(res["scenarios"].values()))["rows"]) if names else 0
+    lines = ["`fmvmg diagnose` on labelled records of a generator this project did not write (its own laws, "
+             "tolerances, channel offsets and gains, noise and effect implementations), diagnosed with each scenario "
+             "and scored against the truth: a null unit is right when the verdict is `none`, a single effect when it "
+             "is accepted first or named in its ambiguity set, a pair when the accepted set is exact. Targets: null "
+             "units `none` in 8 of 10, clear single effects found in 8 of 10 (with `nominal_a`), no effect accepted "
+             f"with a held-out shrink below {res['shrink_floor']:g}. Regenerate with `fmvmg diagnose-independent "
+             "FOLDER --scenario nominal_a --scenario nominal_a_stable_electronics -o out/indep` and "
+             "`python -m fmvmg_sim.validation.page --diagnosis-results out/indep -o docs/validation.md`; without "
+             "`--diagnosis-results` the section diagnoses the records that ship in `tests/data/independent`. "
+             f"Records: {n_rec} (folder `{Path(res['folder']).name}`).", ""]
+    lines += I.format_table(res, numbered=True).rstrip("\n").split("\n")
+    data = {n: res["scenarios"][n]["summary"] for n in names}
+    return Section("Diagnosis on records made elsewhere", lines, data)
+
+
 #: The page's sections, in order: (key, function).
 SECTIONS: list[tuple[str, Callable]] = [
     ("allan", allan_references),
     ("engines", engines),
     ("noise", noise),
     ("compensation", compensation_records),
+    ("diagnosis", diagnosis_records),
 ]
+#: Sections a default run leaves out (minutes per record): run them with ``--only`` or ``--diagnosis-results``.
+OPT_IN = ("diagnosis",)
 
 
-def build_page(keys: list[str] | None = None, quick: bool = False, log=print) -> tuple[str, dict]:
+def build_page(keys: list[str] | None = None, quick: bool = False, log=print,
+               options: dict | None = None) -> tuple[str, dict]:
     """Measure the sections and assemble the page.
 
     Parameters
     ----------
     keys : list of str, optional
-        Sections to run (default: all of :data:`SECTIONS`).
+        Sections to run (default: all of :data:`SECTIONS` but the :data:`OPT_IN` ones).
     quick : bool, optional
     log : callable, optional
+    options : dict, optional
+        ``{section key: keyword arguments}`` for sections that take more (``diagnosis``: ``results``).
 
     Returns
     -------
     (str, dict)
         The markdown page and its numbers.
     """
-    run = [(k, f) for k, f in SECTIONS if keys is None or k in keys]
+    run = [(k, f) for k, f in SECTIONS if (k not in OPT_IN if keys is None else k in keys)]
+    options = options or {}
     md = ["# Validation", "",
           "What the product's accuracy claims rest on, each measured against outside reference data, records the "
           "project did not make, a closed form or the other engine. Every number on this page is regenerated by", "",
           "    python -m fmvmg_sim.validation.page -o docs/validation.md", "",
+          *(["with the diagnosis section (left out by default: minutes per record) added by "
+             "`--diagnosis-results DIR`, a finished `fmvmg diagnose-independent` output folder (its own section "
+             "gives the command),", ""] if any(k == "diagnosis" for k, _ in run) else []),
           "from a source checkout (" + ("quick run: shortened measurements, not the page's figures" if quick else
                                         "the whole page") + ").", ""]
     data = {}
     for k, f in run:
         t0 = time.perf_counter()
-        sec = f(quick=quick, log=log)
+        sec = f(quick=quick, log=log, **options.get(k, {}))
         data[k] = dict(sec.data, wall_time_s=time.perf_counter() - t0)
         md += [f"## {sec.title}", ""] + sec.lines + [""]
     return "\n".join(md), data
@@ -347,8 +411,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, metavar="PATH", help="also write the page's numbers to this JSON file")
     ap.add_argument("--only", default=None, help="comma-separated sections: " + ", ".join(k for k, _ in SECTIONS))
     ap.add_argument("--quick", action="store_true", help="shortened measurements (checks the machinery)")
+    ap.add_argument("--diagnosis-results", default=None, metavar="DIR",
+                    help="add the diagnosis section (left out by default: minutes per record), tabulating a finished "
+                         "`fmvmg diagnose-independent` output folder")
     a = ap.parse_args(argv)
     keys = None
+    options = {}
+    if a.diagnosis_results:
+        if not (Path(a.diagnosis_results) / "scores.json").is_file():
+            print(f"--diagnosis-results: no scores.json in {a.diagnosis_results}", file=sys.stderr)
+            return 2
+        options["diagnosis"] = {"results": a.diagnosis_results}
     if a.only:
         keys = [k.strip() for k in a.only.split(",")]
         bad = [k for k in keys if k not in dict(SECTIONS)]
@@ -359,11 +432,13 @@ def main(argv: list[str] | None = None) -> int:
     if not (REPO / "tests" / "data").is_dir():
         print(f"the validation page needs a source checkout ({REPO / 'tests' / 'data'} not found)", file=sys.stderr)
         return 2
+    if a.diagnosis_results and keys is None:
+        keys = [k for k, _ in SECTIONS]
     out = Path(a.out)
-    if (keys or a.quick) and out.resolve() == (REPO / "docs" / "validation.md").resolve():
+    if (a.only or a.quick) and out.resolve() == (REPO / "docs" / "validation.md").resolve():
         print("--only and --quick write a partial page: give another -o", file=sys.stderr)
         return 2
-    md, data = build_page(keys, a.quick, log=lambda m: print(m, file=sys.stderr))
+    md, data = build_page(keys, a.quick, log=lambda m: print(m, file=sys.stderr), options=options)
     if a.json:
         atomic_write_text(Path(a.json), json.dumps(strict(data), indent=1) + "\n")
     atomic_write_text(out, md)
