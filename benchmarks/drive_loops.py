@@ -157,7 +157,7 @@ def main(argv=None) -> int:
         print("--quick writes a partial page: give another -o", file=sys.stderr)
         return 2
     data = compare_drives(quick=a.quick, log=lambda m: print(m, file=sys.stderr))
-    img = out.parent / "img" / (out.stem.replace("loops", "drive_loops") + ".png")
+    img = out.parent / "img" / f"{out.stem}.png"
     _figure(data, img)
     atomic_write_text(out, page(data, a.quick, os.path.relpath(img, out.parent)))
     print(f"wrote {out} and {img}", file=sys.stderr)
