@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..analysis.series import MAX_GAP_STEPS, MAX_NAN_FILL
 from ..errors import InputError
+from .options import add_json, add_output
 
 
 def register(subparsers) -> None:
@@ -34,8 +35,8 @@ def register(subparsers) -> None:
     p.add_argument("record", metavar="RECORD.csv", help="record file (needs time_s and the analysed column)")
     p.add_argument("--column", default="rate_dps",
                    help="column to analyse (default rate_dps; the deg-based terms assume deg/s)")
-    p.add_argument("--json", action="store_true", help="print one JSON object on stdout and nothing else")
-    p.add_argument("-o", "--output", metavar="DIR", help="write DIR/allan.json and DIR/allan.png")
+    add_json(p, "the result")
+    add_output(p, None, "write DIR/allan.json and DIR/allan.png")
     p.add_argument("--resample", action="store_true",
                    help=f"interpolate onto a uniform grid at the median step (gaps up to {MAX_GAP_STEPS} steps)")
     p.add_argument("--taus", choices=("octave", "dense"), default="octave",
@@ -61,8 +62,8 @@ def run(args: argparse.Namespace) -> int:
     from ..output import check_output_folder, output_folder
     from ..record import atomic_write_text, read_record
 
-    if args.output:
-        check_output_folder(args.output)
+    if args.out:
+        check_output_folder(args.out)
     rec = read_record(args.record, required=("time_s", args.column))
     series = series_from_record(rec, args.column, resample=args.resample)
     res = allan_deviation(series.values, series.fs_Hz, taus=args.taus, unit=series.unit, column=args.column)
@@ -76,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
     out = {"record": str(args.record), **out, "resampled": series.resampled, "n_filled": series.n_filled}
     for note in res.notes:
         sys.stderr.write(f"fmvmg allan: note: {note}\n")
-    if args.output:
-        with output_folder(args.output, command="allan") as tmp:
+    if args.out:
+        with output_folder(args.out, command="allan") as tmp:
             atomic_write_text(tmp / "allan.json", json.dumps(out, indent=2, allow_nan=False) + "\n")
             shown = Path(*Path(args.record).parts[-2:])  # the record and its folder: out/static/record.csv
             res.plot(tmp / "allan.png", title=f"{shown}: {args.column}")

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..jsonout import strict
 from ..record import Record, atomic_write_text, read_record, write_record
+from .options import add_json, add_no_progress, add_output
 
 METHOD_NAMES = ("poly-baseline", "line", "bias", "physics", "emd-rbf", "emd-rbf-ga", "emd-rbf-ga-kf", "vmd-wflp-cssvr")
 #: The method used when ``--method`` is not given: on every measured record the project holds,
@@ -157,7 +158,7 @@ def run(args) -> int:
     cls = get_method(args.method)
     record = read_record(args.record)
     train = read_record(args.train) if args.train else record
-    outdir = Path(args.output) if args.output else Path(args.record).with_suffix("").parent / (
+    outdir = Path(args.out) if args.out else Path(args.record).with_suffix("").parent / (
         Path(args.record).stem + f"-{args.method}")
     staged = OutputFolder(outdir, command="compensate")  # refused now, before the fit, if it cannot be written
     kw = {"progress": not args.no_progress} if "progress" in cls().get_params() else {}
@@ -261,9 +262,9 @@ def register(sub) -> None:
                         "the polynomial in T chosen by validation)")
     p.add_argument("--train", metavar="RECORD.csv", help="fit on this record (held-out evaluation); "
                    "default: fit on RECORD itself (in-sample)")
-    p.add_argument("-o", "--output", metavar="DIR", help="output folder (default: RECORD-stem-METHOD next to RECORD)")
+    add_output(p, None, "output folder (default: RECORD-stem-METHOD next to RECORD)")
     p.add_argument("--seed", type=int, default=0, help="seed of the method's random choices (default 0)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
-    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_no_progress(p)
+    add_json(p, "the result")
     p.set_defaults(func=run)
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..record import atomic_write_text
+from .options import add_json, add_no_plots, add_no_progress, add_output
 
 
 def _parse_methods(text: str) -> list[str]:
@@ -51,7 +52,7 @@ def run(args) -> int:
     from ..output import OutputFolder
 
     methods = _parse_methods(args.methods)
-    outdir = Path(args.output)
+    outdir = Path(args.out)
     staged = OutputFolder(outdir, command="compensate-eval")  # refused now, before the evaluation, if unwritable
     ev = evaluate(methods, seeds=args.seeds, quick=args.quick, in_sample=args.in_sample,
                   bandwidth=not args.no_bandwidth, method_params=_parse_params(args.param),
@@ -91,8 +92,8 @@ def register(sub) -> None:
     p.add_argument("--no-bandwidth", action="store_true", help="skip the rate-table check")
     p.add_argument("--param", action="append", metavar="METHOD:KEY=VALUE",
                    help="constructor argument of a method (repeatable), e.g. vmd-wflp-cssvr:budget=300")
-    p.add_argument("-o", "--output", default="compensation_eval", metavar="DIR", help="output folder")
-    p.add_argument("--no-plots", action="store_true", help="no PNG plots")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
+    add_output(p, "compensation_eval")
+    add_no_plots(p)
+    add_no_progress(p)
+    add_json(p)
     p.set_defaults(func=run)

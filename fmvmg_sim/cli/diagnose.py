@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from .options import add_json, add_no_plots, add_no_progress, add_output, output_dir, progress
+
 
 def register(sub) -> None:
     """Add the ``diagnose`` sub-command.
@@ -21,12 +23,12 @@ def register(sub) -> None:
     p.add_argument("record", help="record CSV (the record format of docs/formats.md)")
     p.add_argument("--scenario", required=True, help="nominal scenario TOML (device, circuit, noise), "
                    "e.g. scenarios/nominal_a.toml")
-    p.add_argument("-o", "--out", default=None, help="output folder (default: out/diagnose_<record name>)")
-    p.add_argument("--json", action="store_true", help="print the report as one JSON object on stdout")
+    add_output(p, None, "output folder (default: out/diagnose_<record name>)")
+    add_json(p, "the report")
     p.add_argument("--null-runs", type=int, default=None, help="null re-simulations (default 6)")
     p.add_argument("--seed", type=int, default=0, help="seed of the null re-simulations")
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_no_plots(p)
+    add_no_progress(p)
     p.set_defaults(func=main)
 
 
@@ -47,10 +49,10 @@ def main(args) -> int:
     from ..output import OutputFolder
     if args.null_runs is not None and args.null_runs < 2:
         raise InputError("needs at least 2 null re-simulations", "--null-runs")
-    out = Path(args.out) if args.out else Path("out") / f"diagnose_{Path(args.record).stem}"
+    out = output_dir(args, Path("out") / f"diagnose_{Path(args.record).stem}")
     staged = OutputFolder(out, command="diagnose")  # refused now, before the diagnosis, if unwritable
     rep = diagnose(args.record, args.scenario, n_null=args.null_runs or N_NULL, seed=args.seed,
-                   progress=False if args.no_progress else None)
+                   progress=progress(args))
     cj = write_report(rep, staged.path)
     if not args.no_plots:
         from ..diagnosis.plots import plot_all

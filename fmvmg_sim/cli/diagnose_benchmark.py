@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from .options import add_json, add_output
+
 
 def register(sub) -> None:
     """Add the ``diagnose-benchmark`` sub-command.
@@ -22,7 +24,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="case seed")
     p.add_argument("--scheduler", default=None, help="address of a running Dask scheduler")
     p.add_argument("--scenario", default=None, help="nominal scenario (default scenarios/nominal_a.toml)")
-    p.add_argument("-o", "--out", default="out/diagnose_benchmark", help="output folder")
+    add_output(p, "out/diagnose_benchmark")
     p.add_argument("--duration-h", type=float, default=3.0, help="case record length in hours (default 3)")
     p.add_argument("--rate-hz", type=float, default=1.0, help="case output rate (default 1 Hz)")
     p.add_argument("--null-runs", type=int, default=4, help="null re-simulations per diagnosis (default 4)")
@@ -41,7 +43,7 @@ def register(sub) -> None:
                    help="diagnose again the stored cases (and labels) of an earlier run's output folder with "
                         "the current code, instead of generating cases (the generation options are then unused); "
                         "when DIR holds its scores, the outcomes are compared case by case")
-    p.add_argument("--json", action="store_true", help="print the scores as one JSON object on stdout")
+    add_json(p, "the scores")
     p.set_defaults(func=main)
 
 

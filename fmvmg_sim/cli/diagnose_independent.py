@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from .options import add_json, add_output
+
 
 def register(sub) -> None:
     """Add the ``diagnose-independent`` sub-command.
@@ -24,11 +26,11 @@ def register(sub) -> None:
     p.add_argument("folder", help="folder of labelled records (labels.json beside the records)")
     p.add_argument("--scenario", action="append", default=None,
                    help="nominal scenario (repeat for several; default nominal_a)")
-    p.add_argument("-o", "--out", default="out/diagnose_independent", help="output folder")
+    add_output(p, "out/diagnose_independent")
     p.add_argument("--cases", default=None, metavar="CASE[,CASE...]", help="only these cases (default all)")
     p.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     p.add_argument("--null-runs", type=int, default=None, help="null re-simulations per diagnosis (default 6)")
-    p.add_argument("--json", action="store_true", help="print the scores as one JSON object on stdout")
+    add_json(p, "the scores")
     p.set_defaults(func=main)
 
 

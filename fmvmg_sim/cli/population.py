@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..jsonout import strict
+from .options import add_json, add_no_plots, add_no_progress, add_output, add_overrides, output_dir, progress
 
 
 def register(sub) -> None:
@@ -27,12 +28,11 @@ def register(sub) -> None:
     p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://host:8786)")
     p.add_argument("--workers", type=int, default=None, help="LocalCluster workers, 1 thread each (default: cores)")
     p.add_argument("--seed", type=int, default=0, help="population seed: every unit's draws and noise (default 0)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any scenario value, e.g. --set device.tolerance.demod_phase_mrad=5 (repeatable)")
-    p.add_argument("-o", "--out", default=None, help="output folder (default: out/population_<scenario name>)")
-    p.add_argument("--json", action="store_true", help="print the report (without per-unit rows) as one JSON object")
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_overrides(p, "device.tolerance.demod_phase_mrad=5")
+    add_output(p, None, "output folder (default: out/population_<scenario name>)")
+    add_json(p, "the report (without per-unit rows)")
+    add_no_plots(p)
+    add_no_progress(p)
     p.set_defaults(func=main)
 
 
@@ -60,11 +60,11 @@ def main(args) -> int:
         raise InputError("needs at least 1 worker", "--workers")
     scn = load_scenario(args.scenario, args.overrides)
     spec = load_spec(args.spec if args.spec else default_spec_path())
-    out = Path(args.out) if args.out else Path("out") / f"population_{scn.name}"
+    out = output_dir(args, Path("out") / f"population_{scn.name}")
     staged = OutputFolder(out, command="population")  # refused now, before the units run, if unwritable
     try:
         pop = run_population(scn, args.units, seed=args.seed, spec=spec, scheduler=args.scheduler,
-                             n_workers=args.workers, progress=False if args.no_progress else None)
+                             n_workers=args.workers, progress=progress(args))
         rep = write_report(pop, staged.path, plots=not args.no_plots)
     except BaseException:
         staged.discard()

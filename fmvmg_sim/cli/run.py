@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..jsonout import strict
+from .options import add_json, add_no_plots, add_no_progress, add_output, add_overrides, output_dir, progress
 
 
 def register(sub) -> None:
@@ -19,15 +20,14 @@ def register(sub) -> None:
     p = sub.add_parser("run", help="simulate a scenario", description=(
         "Simulate a scenario; writes DIR/record.csv (docs/formats.md section 2), DIR/summary.json and PNG plots."))
     p.add_argument("scenario", help="scenario TOML file")
-    p.add_argument("-o", "--out", default=None, help="output folder (default: out/<scenario name>)")
+    add_output(p, None, "output folder (default: out/<scenario name>)")
     p.add_argument("--seed", type=int, default=None, help="random seed (overrides scenario.seed)")
     p.add_argument("--fidelity", choices=("carrier", "envelope", "auto"), default=None,
                    help="engine: carrier (every drive cycle) or envelope (averaged); auto picks envelope above 60 s")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any scenario value, e.g. --set circuit.pi.kp=100 (repeatable)")
-    p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_overrides(p)
+    add_json(p)
+    add_no_plots(p)
+    add_no_progress(p)
     p.set_defaults(func=main)
 
 
@@ -49,10 +49,10 @@ def main(args) -> int:
     from ..scenario import load_scenario
 
     scn = load_scenario(args.scenario, args.overrides, seed=args.seed, fidelity=args.fidelity)
-    out = Path(args.out) if args.out else Path("out") / scn.name
+    out = output_dir(args, Path("out") / scn.name)
     check_fits_in_memory(scn)
     with output_folder(out, expect_bytes=record_size(scn)["csv_bytes"], command="run") as tmp:
-        res, summary = run_scenario(scn, progress=False if args.no_progress else None)
+        res, summary = run_scenario(scn, progress=progress(args))
         write_record(tmp / "record.csv", res.to_record())
         atomic_write_text(tmp / "summary.json", json.dumps(strict(summary), indent=2) + "\n")
         if not args.no_plots:

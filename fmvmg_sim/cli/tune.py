@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..jsonout import strict
 from ..paths import scenarios_dir
+from .options import add_json, add_no_plots, add_no_progress, add_output, add_overrides
 
 DEFAULT_SCENARIO = scenarios_dir() / "startup.toml"
 #: The PLL's target crossover when --bandwidth-Hz is not given (Hz).
@@ -34,12 +35,11 @@ def register(sub) -> None:
         "grid of gains and temperatures on Dask instead (DIR/sweep.csv, sweep.json, sweep_heatmap.png)."))
     p.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO),
                    help="scenario TOML whose device (and circuit overrides) to tune (default: scenarios/startup.toml)")
-    p.add_argument("-o", "--out", default=None, help="output folder (default: out/tune)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any scenario value, e.g. --set device.mechanics.q_drive=3e4 (repeatable)")
-    p.add_argument("--json", action="store_true", help="print the report as one JSON object on stdout")
+    add_output(p, "out/tune")
+    add_overrides(p, "device.mechanics.q_drive=3e4")
+    add_json(p, "the report")
     p.add_argument("--no-sim", action="store_true", help="skip the carrier-engine checks (linear model only)")
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    add_no_plots(p)
     p.add_argument("--gains", nargs=2, type=float, metavar=("KP", "KI"), default=None,
                    help="check these gains instead of running the robust optimisation")
     p.add_argument("--temperatures", nargs="+", type=float, metavar="C", default=None,
@@ -65,7 +65,7 @@ def register(sub) -> None:
                    help="--loop rebalance: design the gains for this integral pole (default: check the device's); "
                         "--loop pll: the target crossover (default 30 Hz)")
     p.add_argument("--phase-margin-deg", type=float, default=60.0, help="--loop pll: target phase margin (default 60)")
-    p.add_argument("--no-progress", action="store_true", help="no progress messages on stderr")
+    add_no_progress(p)
     p.set_defaults(func=main)
 
 
@@ -123,7 +123,7 @@ def main(args) -> int:
     log = (lambda m: None) if args.no_progress else (lambda m: sys.stderr.write(f"fmvmg tune: {m}\n"))
     scn = load_scenario(args.scenario, args.overrides)
     device = scn.device
-    out = Path(args.out) if args.out else Path("out") / "tune"
+    out = Path(args.out)
     temps = args.temperatures or list(CHECK_TEMPERATURES_C)
     if args.loop == "rebalance":
         return _rebalance(args, device, out, temps, log)
