@@ -17,13 +17,7 @@ from .options import add_json, add_output
 
 
 def register(subparsers) -> None:
-    """Add the ``allan`` sub-command to ``subparsers``.
-
-    Parameters
-    ----------
-    subparsers : argparse._SubParsersAction
-        The ``fmvmg`` sub-command set.
-    """
+    """Add the ``allan`` sub-command to ``subparsers`` (an ``argparse._SubParsersAction``)."""
     p = subparsers.add_parser(
         "allan", help="Allan deviation with ARW, bias instability and RRW",
         description=("Overlapping Allan deviation (allantools) of one record column with 68 % confidence "
@@ -45,18 +39,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``fmvmg allan``.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        The parsed command line.
-
-    Returns
-    -------
-    int
-        Exit code 0 (bad input is raised as :class:`~fmvmg_sim.errors.InputError`, exit code 2).
-    """
+    """Run ``fmvmg allan`` with the parsed ``args``; returns the exit code."""
     from ..analysis.allan import allan_deviation
     from ..analysis.series import series_from_record
     from ..output import check_output_folder, output_folder

@@ -10,12 +10,7 @@ from .options import add_json, add_no_plots, add_no_progress, add_output, output
 
 
 def register(sub) -> None:
-    """Add the ``diagnose`` sub-command.
-
-    Parameters
-    ----------
-    sub : argparse._SubParsersAction
-    """
+    """Add the ``diagnose`` sub-command to ``sub`` (an ``argparse._SubParsersAction``)."""
     p = sub.add_parser("diagnose", help="sim-to-real gap diagnosis of a record", description=(
         "Calibrate the nominal model on a training window, localise the gap against a re-simulated null, "
         "attribute it to library effects on forward-chained held-out blocks, and report the held-out gap "
@@ -33,16 +28,7 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    """Run the sub-command.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-
-    Returns
-    -------
-    int
-    """
+    """Run the sub-command with the parsed ``args``; returns the exit code."""
     from ..diagnosis.pipeline import N_NULL, diagnose
     from ..diagnosis.report import write_report
     from ..errors import InputError

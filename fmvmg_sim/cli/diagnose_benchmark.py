@@ -10,12 +10,7 @@ from .options import add_json, add_output
 
 
 def register(sub) -> None:
-    """Add the ``diagnose-benchmark`` sub-command.
-
-    Parameters
-    ----------
-    sub : argparse._SubParsersAction
-    """
+    """Add the ``diagnose-benchmark`` sub-command to ``sub`` (an ``argparse._SubParsersAction``)."""
     p = sub.add_parser("diagnose-benchmark", help="score the diagnosis on labelled simulated cases", description=(
         "Generate labelled cases (nominal parameters perturbed within tolerance; ~20 % null, ~55 % one effect, "
         "~25 % two effects; SNR from below to above the detection limit; random temperature profiles), keep the "
@@ -48,16 +43,7 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    """Run the sub-command.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-
-    Returns
-    -------
-    int
-    """
+    """Run the sub-command with the parsed ``args``; returns the exit code."""
     from ..validation.benchmark import run_benchmark
     from ..validation.cases import CaseMix, MixError
     from ..errors import InputError

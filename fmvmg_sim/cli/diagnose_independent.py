@@ -10,12 +10,7 @@ from .options import add_json, add_output
 
 
 def register(sub) -> None:
-    """Add the ``diagnose-independent`` sub-command.
-
-    Parameters
-    ----------
-    sub : argparse._SubParsersAction
-    """
+    """Add the ``diagnose-independent`` sub-command to ``sub`` (an ``argparse._SubParsersAction``)."""
     p = sub.add_parser("diagnose-independent", help="score the diagnosis on labelled records made elsewhere",
                        description=(
                            "Diagnose every record of FOLDER (case_XXX.csv or .csv.gz beside a labels.json giving each "
@@ -35,16 +30,7 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    """Run the sub-command.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-
-    Returns
-    -------
-    int
-    """
+    """Run the sub-command with the parsed ``args``; returns the exit code."""
     from ..errors import InputError
     from ..output import OutputFolder
     from ..paths import resolve_scenario

@@ -16,13 +16,7 @@ from ..record import write_record
 
 
 def register(subparsers) -> None:
-    """Add the ``import-bmi270`` sub-command to ``subparsers``.
-
-    Parameters
-    ----------
-    subparsers : argparse._SubParsersAction
-        The ``fmvmg`` sub-command set.
-    """
+    """Add the ``import-bmi270`` sub-command to ``subparsers`` (an ``argparse._SubParsersAction``)."""
     p = subparsers.add_parser(
         "import-bmi270", help="convert a BMI270 serial log into a record",
         description=("Convert a Bosch BMI270 PuTTY log (temperature, accel x/y/z, gyro x/y/z per line, no time "
@@ -38,18 +32,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``fmvmg import-bmi270``.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        The parsed command line.
-
-    Returns
-    -------
-    int
-        Exit code 0 (bad input is raised as :class:`~fmvmg_sim.errors.InputError`, exit code 2).
-    """
+    """Run ``fmvmg import-bmi270`` with the parsed ``args``; returns the exit code."""
     out = Path(args.output)
     if out.is_dir():
         raise InputError("expected a file path for -o, got a directory", str(out))

@@ -11,12 +11,7 @@ from .options import add_json, add_no_plots, add_no_progress, add_output, add_ov
 
 
 def register(sub) -> None:
-    """Add the ``population`` sub-command.
-
-    Parameters
-    ----------
-    sub : argparse._SubParsersAction
-    """
+    """Add the ``population`` sub-command to ``sub`` (an ``argparse._SubParsersAction``)."""
     p = sub.add_parser("population", help="population study: yield over the device's tolerances", description=(
         "Draw N units uniformly within the device file's [tolerance] table (unit and law knobs), run each over the "
         "scenario on Dask (a LocalCluster with one worker per core unless --scheduler), and report the figures "
@@ -37,17 +32,7 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    """Run the sub-command.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-
-    Returns
-    -------
-    int
-        Exit code.
-    """
+    """Run the sub-command with the parsed ``args``; returns the exit code."""
     from ..errors import InputError
     from ..output import OutputFolder
     from ..population.report import write_report

@@ -11,12 +11,7 @@ from .options import add_json, add_no_plots, add_no_progress, add_output, add_ov
 
 
 def register(sub) -> None:
-    """Add the ``run`` sub-command.
-
-    Parameters
-    ----------
-    sub : argparse._SubParsersAction
-    """
+    """Add the ``run`` sub-command to ``sub`` (an ``argparse._SubParsersAction``)."""
     p = sub.add_parser("run", help="simulate a scenario", description=(
         "Simulate a scenario; writes DIR/record.csv (docs/formats.md section 2), DIR/summary.json and PNG plots."))
     p.add_argument("scenario", help="scenario TOML file")
@@ -32,17 +27,7 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    """Run the sub-command.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-
-    Returns
-    -------
-    int
-        Exit code.
-    """
+    """Run the sub-command with the parsed ``args``; returns the exit code."""
     from ..output import output_folder
     from ..record import atomic_write_text, write_record
     from ..runner import check_fits_in_memory, record_size, run_scenario, vref_profile_V

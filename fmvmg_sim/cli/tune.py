@@ -21,12 +21,7 @@ PLL_BANDWIDTH_HZ = 30.0
 
 
 def register(sub) -> None:
-    """Add the ``tune`` sub-command.
-
-    Parameters
-    ----------
-    sub : argparse._SubParsersAction
-    """
+    """Add the ``tune`` sub-command to ``sub`` (an ``argparse._SubParsersAction``)."""
     p = sub.add_parser("tune", help="PI gains of the drive amplitude loop (robust over temperature)", description=(
         "Linearise the AGC loop of the scenario's device at each temperature, choose PI gains that minimise the "
         "worst-case settling time over -40..85 C and a Q_d tolerance (CasADi/IPOPT) subject to phase margin, gain "
@@ -100,17 +95,7 @@ def _check_args(args):
 
 
 def main(args) -> int:
-    """Run the sub-command.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-
-    Returns
-    -------
-    int
-        Exit code.
-    """
+    """Run the sub-command with the parsed ``args``; returns the exit code."""
     import numpy as np
 
     from ..output import output_folder
