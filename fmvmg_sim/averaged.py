@@ -92,7 +92,7 @@ def carrier_phasors(dg: Diagram, V_x: complex, V_ps: complex) -> tuple[complex, 
     th = 2 * np.pi * np.arange(_NFFT) / _NFFT
     e = np.exp(1j * th)
     vx, vps = np.real(V_x * e), np.real(V_ps * e)
-    n = dg.vdac_V / np.sqrt(vx ** 2 + vps ** 2) if dg.carrier_mode == "normalized" else np.ones_like(th)
+    n = dg.amplitude_loop.carrier_gain(vx, vps)
     c, s = np.cos(dg.phase_trim_rad), np.sin(dg.phase_trim_rad)
     carrier = _fundamental(n * vps)
     ref_i = _fundamental(n * (c * vps - s * vx))
@@ -182,10 +182,7 @@ def ripple_feedback(dg: Diagram, omega: float, V_ps: complex) -> complex:
     -------
     complex
     """
-    R2 = dg.rectifier.second_harmonic_gain() * abs(V_ps) * np.exp(2j * np.angle(V_ps))
-    H2 = dg.amplitude_lpf.frequency_response(2 * omega)[0, 0]
-    pi2 = dg.pi.kp + dg.pi.ki_per_s / (2j * omega)
-    return complex(-pi2 * H2 * R2)
+    return dg.amplitude_loop.effort_ripple(omega, V_ps)
 
 
 def _chain(dg: Diagram, omega: float) -> tuple:
@@ -211,9 +208,9 @@ def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float, chain: tuple |
 
 
 def _amplitude(dg: Diagram, omega: float, vref: float, chain: tuple | None = None) -> float:
-    vps_amp = (vref - dg.rectifier.offset_V) / dg.rectifier.describing_gain()
+    """The drive amplitude the loop holds at ``omega`` for the set-point ``vref``."""
     Hx, Hps = _chain(dg, omega) if chain is None else chain
-    return vps_amp / abs(Hx * Hps)
+    return dg.amplitude_loop.held_drive_amplitude_m(Hx * Hps, vref)
 
 
 def oscillation_frequency(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = None) -> float:
