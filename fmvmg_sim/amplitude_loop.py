@@ -24,7 +24,7 @@ A change to the closure (a detector offset, another filter) is made here and rea
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -33,7 +33,7 @@ from blocks import FullWaveRectifier, LowPass2, PIController
 from blocks.ops import numpy_ops
 
 from .numerics.discretize import zoh
-from .numerics.layout import lpf_step
+from .numerics.layout import Layout, lpf_step
 
 #: Floor of the carrier normaliser's amplitude detector, as a fraction of the phase-shifted pickoff's
 #: amplitude at the set-point: below it the 'normalized' carrier shrinks with the pickoff instead of
@@ -52,6 +52,8 @@ MODULATOR_FIELDS = [("k_mod", ()), ("vdac", ())]
 NORMALISER_FIELDS = [("normalized", ()), ("n_floor_V", ())]
 #: Everything a carrier step with the rectifier loop reads, in layout order.
 CARRIER_FIELDS = DETECTOR_FIELDS + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + NORMALISER_FIELDS
+#: The low-pass and the PI alone (:meth:`AmplitudeLoop.regulator`).
+REGULATOR_LAYOUT = Layout(SMOOTHING_FIELDS + CONTROLLER_FIELDS)
 
 
 class EnvelopeRows(NamedTuple):
@@ -315,6 +317,26 @@ class AmplitudeLoop:
         return dict(rect_k=FullWaveRectifier.carrier_constants(omega_rad_s, h_s), rect_gain=self.detector.gain,
                     rect_offset=self.detector.offset_V, **self.smoothing_step(h_s), **self.controller_params(),
                     **self.modulator_params(), normalized=1.0 if self.normalized else 0.0, n_floor_V=self.floor_V)
+
+    def regulator(self, h_s: float, controller: PIController | None = None) -> "AmplitudeLoopStep":
+        """The low-pass, comparator and PI as a numeric step face for steps of ``h_s`` (no detector).
+
+        For a model that detects the amplitude its own way (an averaged start-up, a PLL's amplitude channel).
+
+        Parameters
+        ----------
+        h_s : float
+            Step length.
+        controller : PIController, optional
+            Another PI in place of the loop's (other gains under study).
+
+        Returns
+        -------
+        AmplitudeLoopStep
+        """
+        loop = self if controller is None else replace(self, controller=controller)
+        fields = {**loop.smoothing_step(h_s), **loop.controller_params()}
+        return AmplitudeLoopStep(REGULATOR_LAYOUT, REGULATOR_LAYOUT.pack(fields))
 
 
 class AmplitudeLoopStep:

@@ -7,14 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..averaged import SteadyState, steady_state
-from ..amplitude_loop import NORMALISER_FLOOR_REL
 from ..diagram import CORE_INPUTS, CORE_OUTPUTS, Diagram
 from ..numerics.discretize import expm_derivative, zoh
 from ..numerics.layout import Layout
 from .step import N_CORE, PARAMS, STATE
-
-#: Floor of the carrier normaliser, as a fraction of the v_ps amplitude at the set-point (the diagram's).
-NORMALISER_FLOOR = NORMALISER_FLOOR_REL
 
 
 @dataclass

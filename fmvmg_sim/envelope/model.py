@@ -13,10 +13,11 @@ with the drive displacement as phase reference (``X = A`` real):
 
   (first order in the envelope: its amplitude response is within 1e-4 of the second-order
   mode's, see the tests); ``rho = min(1, A / A_floor)`` is the carrier normaliser's floor:
-  below it the carrier shrinks with the pickoff (:meth:`fmvmg_sim.diagram.Diagram.normaliser_floor_V`);
+  below it the carrier shrinks with the pickoff (:attr:`fmvmg_sim.amplitude_loop.AmplitudeLoop.floor_V`);
 * rectifier + LPF (4): the LPF driven by the describing function ``(2/pi) G_r |H_dx H_ps| A``;
 * comparator and PI: ``u = Kp (Vref - r) + Ki I``, clamped, the integrator held while the error
-  pushes further into the clamp (:meth:`blocks.PIController.clamp_state`);
+  pushes further into the clamp (:meth:`blocks.PIController.clamp_state`); these rows are the
+  amplitude loop's envelope face (:meth:`fmvmg_sim.amplitude_loop.AmplitudeLoop.envelope_rows`);
 * sense mode: the resonator's exact envelope face (:meth:`blocks.TwoModeResonator.envelope_mode`),
   ``Y = Y_s + d F_y``, ``Y_s' = s_1 Y_s + r F_y``, ``F_y = -(2 m_c W + c_q) i w A - k_q A + F_noise``;
 * sense chain ``V_s = H_se (K_sy Y + (C_ft/C_f) V_ac) + noise`` and the output LPF applied to
