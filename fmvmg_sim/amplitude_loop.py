@@ -389,14 +389,12 @@ class AmplitudeLoopStep:
         ----------
         s_amp : sequence
             The low-pass's two states at the step's start.
-        integ : float or symbolic
-            The PI's integrator.
-        detected : float or symbolic
-            The detector's mean output over the step.
+        integ, detected : float or symbolic
+            The PI's integrator at the start; the detector's mean output over the step.
         h_s : float or symbolic
             Step length.
         ops : object, optional
-            Math backend.
+            Math backend (numpy or CasADi).
 
         Returns
         -------
