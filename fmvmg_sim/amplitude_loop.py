@@ -245,6 +245,41 @@ class AmplitudeLoop:
         pi2 = self.controller.kp + self.controller.ki_per_s / (2j * omega_rad_s)
         return complex(-pi2 * H2 * R2)
 
+    def drive_phasor(self, effort_V, carrier: complex, ripple: complex = 0.0) -> complex:
+        """Fundamental of the modulator's output ``K_mod u c`` for a PI output ``effort_V`` (plus its 2-omega
+        ``ripple``, which beats with the carrier down to the fundamental) and a carrier fundamental ``carrier``.
+
+        Parameters
+        ----------
+        effort_V : float or complex
+            The PI output's mean.
+        carrier : complex
+            The carrier's fundamental (:meth:`carrier_gain` times ``v_ps``, over a cycle).
+        ripple : complex, optional
+            The PI output's 2-omega phasor (:meth:`effort_ripple`).
+
+        Returns
+        -------
+        complex
+        """
+        return self.k_mod_per_V * (effort_V * carrier + 0.5 * ripple * np.conj(carrier))
+
+    def effort_for(self, V_ac: complex, carrier: complex, ripple: complex = 0.0) -> complex:
+        """The PI output whose modulator output has the fundamental ``V_ac``: the inverse of :meth:`drive_phasor`.
+
+        Parameters
+        ----------
+        V_ac : complex
+        carrier : complex
+        ripple : complex, optional
+
+        Returns
+        -------
+        complex
+            Real where the loop's phase balances.
+        """
+        return (V_ac / self.k_mod_per_V - 0.5 * ripple * np.conj(carrier)) / carrier
+
     # --- the envelope face --------------------------------------------------------------------
     def envelope_rows(self, response: complex) -> EnvelopeRows:
         """The loop's linear rows in the averaged model.

@@ -203,7 +203,7 @@ def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float, chain: tuple |
     F = A / z1[0]
     V_ac = F / dg.comb_drive.linear_coef_N_per_V
     U2 = ripple_feedback(dg, omega, V_ps) if ripple else 0.0
-    u = (V_ac / dg.modulator.k_per_V - 0.5 * U2 * np.conj(carrier)) / carrier
+    u = dg.amplitude_loop.effort_for(V_ac, carrier, U2)
     return u, dict(V_x=V_x, V_ps=V_ps, carrier=carrier, R_I=R_I, R_Q=R_Q, z1=z1, F=F, V_ac=V_ac)
 
 
@@ -303,7 +303,7 @@ def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = No
     X = complex(A)  # the phase reference is the drive displacement
     Y = p["z1"][2] * p["F"]
     ripple = 0.0 if saturated else ripple_feedback(dg, w, p["V_ps"])
-    V_ac = dg.modulator.k_per_V * (u.real * p["carrier"] + 0.5 * ripple * np.conj(p["carrier"]))
+    V_ac = dg.amplitude_loop.drive_phasor(u.real, p["carrier"], ripple)
     sp = dg.sense_pickoff
     V_s = dg.sense_amps_response(w) * (sp.gain_V_per_m * Y + sp.c_feedthrough_F / sp.c_feedback_F * V_ac)
     k_out = dg.output_lpf.gain
