@@ -92,7 +92,7 @@ def carrier_phasors(dg: Diagram, V_x: complex, V_ps: complex) -> tuple[complex, 
     th = 2 * np.pi * np.arange(_NFFT) / _NFFT
     e = np.exp(1j * th)
     vx, vps = np.real(V_x * e), np.real(V_ps * e)
-    n = dg.vdac_V / np.sqrt(vx ** 2 + vps ** 2) if dg.carrier_mode == "normalized" else np.ones_like(th)
+    n = dg.amplitude_loop.carrier_gain(vx, vps)
     c, s = np.cos(dg.phase_trim_rad), np.sin(dg.phase_trim_rad)
     carrier = _fundamental(n * vps)
     ref_i = _fundamental(n * (c * vps - s * vx))
@@ -182,10 +182,7 @@ def ripple_feedback(dg: Diagram, omega: float, V_ps: complex) -> complex:
     -------
     complex
     """
-    R2 = dg.rectifier.second_harmonic_gain() * abs(V_ps) * np.exp(2j * np.angle(V_ps))
-    H2 = dg.amplitude_lpf.frequency_response(2 * omega)[0, 0]
-    pi2 = dg.pi.kp + dg.pi.ki_per_s / (2j * omega)
-    return complex(-pi2 * H2 * R2)
+    return dg.amplitude_loop.effort_ripple(omega, V_ps)
 
 
 def _chain(dg: Diagram, omega: float) -> tuple:
@@ -206,14 +203,14 @@ def _loop(dg: Diagram, omega: float, A: float, rate_rad_s: float, chain: tuple |
     F = A / z1[0]
     V_ac = F / dg.comb_drive.linear_coef_N_per_V
     U2 = ripple_feedback(dg, omega, V_ps) if ripple else 0.0
-    u = (V_ac / dg.modulator.k_per_V - 0.5 * U2 * np.conj(carrier)) / carrier
+    u = dg.amplitude_loop.effort_for(V_ac, carrier, U2)
     return u, dict(V_x=V_x, V_ps=V_ps, carrier=carrier, R_I=R_I, R_Q=R_Q, z1=z1, F=F, V_ac=V_ac)
 
 
 def _amplitude(dg: Diagram, omega: float, vref: float, chain: tuple | None = None) -> float:
-    vps_amp = (vref - dg.rectifier.offset_V) / dg.rectifier.describing_gain()
+    """The drive amplitude the loop holds at ``omega`` for the set-point ``vref``."""
     Hx, Hps = _chain(dg, omega) if chain is None else chain
-    return vps_amp / abs(Hx * Hps)
+    return dg.amplitude_loop.held_drive_amplitude_m(Hx * Hps, vref)
 
 
 def oscillation_frequency(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = None) -> float:
@@ -306,7 +303,7 @@ def steady_state(dg: Diagram, rate_rad_s: float = 0.0, vref_V: float | None = No
     X = complex(A)  # the phase reference is the drive displacement
     Y = p["z1"][2] * p["F"]
     ripple = 0.0 if saturated else ripple_feedback(dg, w, p["V_ps"])
-    V_ac = dg.modulator.k_per_V * (u.real * p["carrier"] + 0.5 * ripple * np.conj(p["carrier"]))
+    V_ac = dg.amplitude_loop.drive_phasor(u.real, p["carrier"], ripple)
     sp = dg.sense_pickoff
     V_s = dg.sense_amps_response(w) * (sp.gain_V_per_m * Y + sp.c_feedthrough_F / sp.c_feedback_F * V_ac)
     k_out = dg.output_lpf.gain

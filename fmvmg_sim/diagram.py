@@ -24,12 +24,15 @@ is linear for a given modulator gain ``g = K_mod u n`` and rate, both slowly var
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+
 import control
 import numpy as np
 
 from blocks import (AllPassPhaseShifter, CapacitivePickoff, DifferentialAmplifier, ElectrostaticDrive,
                     FullWaveRectifier, LowPass2, Multiplier, PIController, SummingJunction, TwoModeResonator)
 
+from .amplitude_loop import NORMALISER_FLOOR_REL, AmplitudeLoop
 from .device import Device, OperatingPoint
 from .rebalance import build_sense_loop
 
@@ -37,10 +40,6 @@ from .rebalance import build_sense_loop
 CORE_INPUTS = ("F_x_ext", "F_y_ext", "n_drive", "n_sense")
 #: Outputs of the linear core, in order.
 CORE_OUTPUTS = ("v_x", "v_ps", "v_s", "x", "y", "v_ac")
-#: Floor of the carrier normaliser's amplitude detector, as a fraction of the phase-shifted pickoff's
-#: amplitude at the set-point: below it the 'normalized' carrier shrinks with the pickoff instead of
-#: amplifying noise (both engines apply it).
-NORMALISER_FLOOR_REL = 0.1
 
 
 @dataclass
@@ -183,17 +182,27 @@ class Diagram:
         off[2] = self.sense_amp1.offset_V * self.sense_amp2.gain + self.sense_amp2.offset_V
         return off
 
+    @cached_property
+    def amplitude_loop(self) -> AmplitudeLoop:
+        """The drive amplitude loop's closure (rectifier, low-pass, set-point, PI, normaliser, modulator gain).
+
+        Every model that runs the loop reads it from here (:mod:`fmvmg_sim.amplitude_loop`).
+        """
+        return AmplitudeLoop(detector=self.rectifier, smoothing=self.amplitude_lpf, vref_V=self.vref_V,
+                             controller=self.pi, k_mod_per_V=self.modulator.k_per_V, vdac_V=self.vdac_V,
+                             normalized=self.carrier_mode == "normalized", floor_rel=NORMALISER_FLOOR_REL)
+
     def normaliser_floor_V(self) -> float:
         """Floor of the carrier normaliser ``n = Vdac / max(sqrt(v_x^2 + v_ps^2), floor)`` (V).
 
-        :data:`NORMALISER_FLOOR_REL` of the phase-shifted pickoff's amplitude at the set-point
-        (the amplitude the rectifier and low-pass read as Vref).
+        :data:`~fmvmg_sim.amplitude_loop.NORMALISER_FLOOR_REL` of the phase-shifted pickoff's amplitude
+        at the set-point (the amplitude the rectifier and low-pass read as Vref).
 
         Returns
         -------
         float
         """
-        return NORMALISER_FLOOR_REL * (self.vref_V - self.rectifier.offset_V) / self.rectifier.describing_gain()
+        return self.amplitude_loop.floor_V
 
     # --- envelope faces of the chains -------------------------------------------------
     def drive_chain_response(self, omega_rad_s: float) -> complex:

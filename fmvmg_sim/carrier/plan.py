@@ -6,16 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blocks import FullWaveRectifier
-
 from ..averaged import SteadyState, steady_state
-from ..diagram import CORE_INPUTS, CORE_OUTPUTS, NORMALISER_FLOOR_REL, Diagram
+from ..diagram import CORE_INPUTS, CORE_OUTPUTS, Diagram
 from ..numerics.discretize import expm_derivative, zoh
 from ..numerics.layout import Layout
 from .step import N_CORE, PARAMS, STATE
-
-#: Floor of the carrier normaliser, as a fraction of the v_ps amplitude at the set-point (the diagram's).
-NORMALISER_FLOOR = NORMALISER_FLOOR_REL
 
 
 @dataclass
@@ -125,18 +120,13 @@ def make_plan(dg: Diagram, h_s: float, noise_on: dict | None = None, scale: np.n
     sig = noise_sigmas(dg, h_s, noise_on)
     idx = {name: k for k, name in enumerate(CORE_OUTPUTS)}
     off = dg.core_output_offset()
-    Phi_amp, Gam_amp = zoh(np.asarray(dg.amplitude_lpf.linear_model().A), np.asarray(dg.amplitude_lpf.linear_model().B), h_s)
     ol = dg.output_lpf.linear_model()
     Phi_out, Gam_out = zoh(np.asarray(ol.A), np.asarray(ol.B), h_s)
     base = dict(
         Phi=Phi, Phi_g=Phi_g, g0=g0, Gam_fx=Gam[:, CORE_INPUTS.index("F_x_ext")], Gam_w=Gam * sig[None, :],
         C_vx=C[idx["v_x"]], C_vps=C[idx["v_ps"]], C_vs=C[idx["v_s"]],
         off_vx=off[idx["v_x"]], off_vps=off[idx["v_ps"]], off_vs=off[idx["v_s"]],
-        rect_k=FullWaveRectifier.carrier_constants(ss.omega_rad_s, h_s), rect_gain=dg.rectifier.gain,
-        rect_offset=dg.rectifier.offset_V, Phi_amp=Phi_amp, Gam_amp=Gam_amp[:, 0],
-        vref=dg.vref_V, kp=dg.pi.kp, ki=dg.pi.ki_per_s, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
-        k_mod=dg.modulator.k_per_V, vdac=dg.vdac_V, normalized=1.0 if dg.carrier_mode == "normalized" else 0.0,
-        n_floor_V=dg.normaliser_floor_V(), quad_coef=dg.comb_drive.quadratic_coef_N_per_V2,
+        **dg.amplitude_loop.carrier_params(ss.omega_rad_s, h_s), quad_coef=dg.comb_drive.quadratic_coef_N_per_V2,
         vdc2=dg.comb_drive.vdc_V ** 2, cos_ref=1.0, sin_ref=0.0, k_demod=dg.demodulator.k_per_V,
         Phi_out=Phi_out, Gam_out=Gam_out[:, 0], h=h_s,
         Gam_fy=Gam[:, CORE_INPUTS.index("F_y_ext")],  # a closed sense loop's force (carrier.rebalance)

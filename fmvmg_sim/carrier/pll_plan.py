@@ -84,16 +84,15 @@ def pll_plan_common(pll: PLLDrive, h_s: float, noise_on: dict | None, scale: np.
         return Ph, Ga[:, 0]
 
     Phi_pd, Gam_pd = lpf(pll.pd_lpf)
-    Phi_amp, Gam_amp = lpf(dg.amplitude_lpf)
     Phi_out, Gam_out = lpf(dg.output_lpf)
     lf = pll.loop_filter
+    loop = dg.amplitude_loop
     base = dict(
         w0=ss.omega_rad_s, C_vx=C[idx["v_x"]], C_vs=C[idx["v_s"]], off_vx=off[idx["v_x"]], off_vs=off[idx["v_s"]],
         f_free=pll.nco.f_free_Hz, k_vco=pll.nco.k_vco_Hz_per_V, pd_cos=np.cos(pll.detector.trim_rad),
         pd_sin=np.sin(pll.detector.trim_rad), k_amp=pll.detector.k_amp,
         Phi_pd=Phi_pd, Gam_pd=Gam_pd, kp_pll=lf.kp, ki_pll=lf.ki_per_s, v_min=lf.u_min_V, v_max=lf.u_max_V,
-        Phi_amp=Phi_amp, Gam_amp=Gam_amp, vref=dg.vref_V, kp=dg.pi.kp, ki=dg.pi.ki_per_s,
-        u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V, k_mod=dg.modulator.k_per_V, vdac=dg.vdac_V,
+        **loop.smoothing_step(h_s), **loop.controller_params(), **loop.modulator_params(),
         quad_coef=dg.comb_drive.quadratic_coef_N_per_V2, vdc2=dg.comb_drive.vdc_V ** 2,
         cos_ref=1.0, sin_ref=0.0, k_demod=dg.demodulator.k_per_V, Phi_out=Phi_out, Gam_out=Gam_out, h=h_s,
     )

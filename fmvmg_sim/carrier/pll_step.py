@@ -20,9 +20,10 @@ from blocks.nco import ControlledOscillator
 from blocks.ops import numpy_ops
 from blocks.phase_detector import QuadratureDetector
 
+from ..amplitude_loop import CONTROLLER_FIELDS, MODULATOR_FIELDS, SMOOTHING_FIELDS, AmplitudeLoopStep
 from ..compiled import StepModel
-from ..numerics.layout import Layout, dot, matvec
-from .step import N_CORE, N_NOISE, _lpf_step
+from ..numerics.layout import Layout, dot, lpf_step as _lpf_step, matvec
+from .step import N_CORE, N_NOISE
 
 STATE = Layout([
     ("z", (N_CORE,)), ("theta", ()), ("s_pd", (2,)), ("integ_pll", ()), ("v_tune", ()),
@@ -37,9 +38,8 @@ PARAMS = Layout([
     ("C_vx", (N_CORE,)), ("C_vs", (N_CORE,)), ("off_vx", ()), ("off_vs", ()),
     ("f_free", ()), ("k_vco", ()), ("pd_cos", ()), ("pd_sin", ()), ("k_amp", ()),
     ("Phi_pd", (2, 2)), ("Gam_pd", (2,)), ("kp_pll", ()), ("ki_pll", ()), ("v_min", ()), ("v_max", ()),
-    ("Phi_amp", (2, 2)), ("Gam_amp", (2,)),
-    ("vref", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
-    ("k_mod", ()), ("vdac", ()), ("quad_coef", ()), ("vdc2", ()),
+] + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the amplitude loop's
+    ("quad_coef", ()), ("vdc2", ()),
     ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
     ("Phi_out", (2, 2)), ("Gam_out", (2,)),
     ("h", ()),
@@ -76,7 +76,8 @@ def step(x, p, w, ops=numpy_ops):
     # --- linear core driven by v_ac = K_mod u Vdac cos(theta), the oscillator at a held frequency --------
     G, G_w = P(p, "G"), P(p, "G_w")
     dw = omega - P(p, "w0")
-    a = P(p, "k_mod") * u * P(p, "vdac")
+    agc = AmplitudeLoopStep(PARAMS, p)
+    a = agc.modulator_gain(u, P(p, "vdac"))
     lin = matvec(P(p, "Phi"), z)
     wn = matvec(P(p, "Gam_w"), list(w))
     Gfx, fq = P(p, "Gam_fx"), S(x, "fq")
@@ -93,9 +94,7 @@ def step(x, p, w, ops=numpy_ops):
     s_pd = _lpf_step(P(p, "Phi_pd"), P(p, "Gam_pd"), S(x, "s_pd"), pd)
     loop = PIController(kp=P(p, "kp_pll"), ki_per_s=P(p, "ki_pll"), u_min_V=P(p, "v_min"), u_max_V=P(p, "v_max"))
     integ_pll1, v_tune1 = loop.carrier_step(S(x, "integ_pll"), s_pd[0], h, ops)
-    s_amp = _lpf_step(P(p, "Phi_amp"), P(p, "Gam_amp"), S(x, "s_amp"), amp)
-    agc = PIController(kp=P(p, "kp"), ki_per_s=P(p, "ki"), u_min_V=P(p, "u_min"), u_max_V=P(p, "u_max"))
-    integ1, u1 = agc.carrier_step(S(x, "integ"), P(p, "vref") - s_amp[0], h, ops)
+    s_amp, integ1, u1 = agc.regulate(S(x, "s_amp"), S(x, "integ"), amp, h, ops)
     # --- rate and quadrature demodulated against the oscillator --------------------------------------
     c, s = P(p, "cos_ref"), P(p, "sin_ref")
     vd = P(p, "vdac")
@@ -105,7 +104,7 @@ def step(x, p, w, ops=numpy_ops):
     s_i = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_i"), demod.carrier_mean(vs0, vs1, ri0, ri1))
     s_q = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_q"), demod.carrier_mean(vs0, vs1, rq0, rq1))
     # --- quadratic comb force held over the next step -------------------------------------------------
-    vac1 = P(p, "k_mod") * u1 * vd * c1
+    vac1 = agc.modulator_gain(u1, vd) * c1
     fq1 = P(p, "quad_coef") * (P(p, "vdc2") + vac1 * vac1)
     acc = [S(x, "acc_rate") + s_i[0], S(x, "acc_quad") + s_q[0], S(x, "acc_amp") + s_amp[0], S(x, "acc_u") + u1,
            S(x, "acc_f") + omega / (2 * np.pi), S(x, "acc_tune") + v_tune1]

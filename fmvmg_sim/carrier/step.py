@@ -4,9 +4,11 @@ The linear core (resonator, pickoffs, amplifiers, phase shifter, modulator gain,
 comb drive) is advanced by its exact discretisation, scheduled in the slowly varying
 modulator gain ``g``: ``z+ = (Phi + (g - g0) Phi_g) z + Gamma w`` (first order in
 ``g - g0``; :func:`fmvmg_sim.numerics.discretize.expm_derivative`). The nonlinear
-blocks use their carrier faces: the rectifier integrates ``|v|`` exactly over the
-step, the demodulators take the step mean of the product, the PI clamps with
-anti-windup, the comb drive's quadratic force is held over the next step.
+blocks use their carrier faces: the demodulators take the step mean of the product,
+the comb drive's quadratic force is held over the next step. The amplitude loop (the
+rectifier integrating ``|v|`` exactly over the step, the low-pass, the PI clamping with
+anti-windup, the carrier normaliser) is its closure's step face
+(:class:`fmvmg_sim.amplitude_loop.AmplitudeLoopStep`).
 
 The same function serves numerically (numpy backend, for tests) and symbolically
 (CasADi backend, for the compiled engine).
@@ -14,10 +16,11 @@ The same function serves numerically (numpy backend, for tests) and symbolically
 
 from __future__ import annotations
 
-from blocks import FullWaveRectifier, Multiplier, PIController
+from blocks import Multiplier
 from blocks.ops import numpy_ops
 
-from ..numerics.layout import Layout, dot, matvec
+from ..amplitude_loop import CARRIER_FIELDS, AmplitudeLoopStep
+from ..numerics.layout import Layout, dot, lpf_step as _lpf_step, matvec
 
 N_CORE = 8
 N_NOISE = 4  # F_x Brownian, F_y Brownian, drive-front-end voltage, sense-front-end voltage
@@ -33,10 +36,7 @@ PARAMS = Layout([
     ("Phi", (N_CORE, N_CORE)), ("Phi_g", (N_CORE, N_CORE)), ("g0", ()),
     ("Gam_fx", (N_CORE,)), ("Gam_w", (N_CORE, N_NOISE)),
     ("C_vx", (N_CORE,)), ("C_vps", (N_CORE,)), ("C_vs", (N_CORE,)), ("off_vx", ()), ("off_vps", ()), ("off_vs", ()),
-    ("rect_k", (4,)), ("rect_gain", ()), ("rect_offset", ()),
-    ("Phi_amp", (2, 2)), ("Gam_amp", (2,)),
-    ("vref", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
-    ("k_mod", ()), ("vdac", ()), ("normalized", ()), ("n_floor_V", ()),
+] + CARRIER_FIELDS + [  # the amplitude loop's (fmvmg_sim.amplitude_loop)
     ("quad_coef", ()), ("vdc2", ()),
     ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
     ("Phi_out", (2, 2)), ("Gam_out", (2,)),
@@ -72,7 +72,8 @@ def step(x, p, w, ops=numpy_ops, dz=None):
     n, u = S(x, "n"), S(x, "u")
     vx0, vps0, vs0 = S(x, "vx"), S(x, "vps"), S(x, "vs")
     # --- linear core, scheduled in the modulator gain g = K_mod u n ------------------
-    g = P(p, "k_mod") * u * n
+    loop = AmplitudeLoopStep(PARAMS, p)
+    g = loop.modulator_gain(u, n)
     Phi, Phi_g = P(p, "Phi"), P(p, "Phi_g")
     Gw, Gfx = P(p, "Gam_w"), P(p, "Gam_fx")
     dz_g = matvec(Phi_g, z)
@@ -87,16 +88,9 @@ def step(x, p, w, ops=numpy_ops, dz=None):
     vps1 = dot(P(p, "C_vps"), z1) + P(p, "off_vps")
     vs1 = dot(P(p, "C_vs"), z1) + P(p, "off_vs")
     # --- amplitude loop: rectifier (3), low-pass (4), comparator (5), PI (7) -----------
-    rect = FullWaveRectifier(gain=P(p, "rect_gain"), offset_V=P(p, "rect_offset"))
-    rho = rect.carrier_mean(vps0, vps1, P(p, "rect_k"), ops)
-    s_amp = _lpf_step(P(p, "Phi_amp"), P(p, "Gam_amp"), S(x, "s_amp"), rho)
-    e = P(p, "vref") - s_amp[0]
-    pi = PIController(kp=P(p, "kp"), ki_per_s=P(p, "ki"), u_min_V=P(p, "u_min"), u_max_V=P(p, "u_max"))
-    integ1, u1 = pi.carrier_step(S(x, "integ"), e, h, ops)
+    s_amp, integ1, u1 = loop.advance(S(x, "s_amp"), S(x, "integ"), vps0, vps1, h, ops)
     # --- carrier normalisation (fixed-amplitude 'Vdac sin') or the pickoff as is -------
-    amp1 = ops.fmax(ops.sqrt(vx1 * vx1 + vps1 * vps1), P(p, "n_floor_V"))
-    norm = P(p, "normalized")
-    n1 = norm * P(p, "vdac") / amp1 + (1 - norm)
+    n1 = loop.normaliser(vx1, vps1, ops)
     # --- demodulation (13) and output low-pass (14), in phase and in quadrature --------
     c, s = P(p, "cos_ref"), P(p, "sin_ref")
     demod = Multiplier(k_per_V=P(p, "k_demod"))
@@ -105,7 +99,7 @@ def step(x, p, w, ops=numpy_ops, dz=None):
     s_i = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_i"), demod.carrier_mean(vs0, vs1, ri0, ri1))
     s_q = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_q"), demod.carrier_mean(vs0, vs1, rq0, rq1))
     # --- quadratic comb force held over the next step -----------------------------------
-    vac1 = P(p, "k_mod") * u1 * n1 * vps1
+    vac1 = loop.modulator_gain(u1, n1) * vps1
     fq1 = P(p, "quad_coef") * (P(p, "vdc2") + vac1 * vac1)
     # --- frequency counter: rising zero crossings of v_x, interpolated -----------------
     t0 = S(x, "t")
@@ -116,11 +110,6 @@ def step(x, p, w, ops=numpy_ops, dz=None):
     # integrate-and-dump outputs (sums over the output interval; the roll-out zeroes them after each sample)
     acc = [S(x, "acc_rate") + s_i[0], S(x, "acc_quad") + s_q[0], S(x, "acc_amp") + s_amp[0], S(x, "acc_u") + u1]
     return z1 + s_amp + [integ1, u1, n1, vx1, vps1, vs1] + s_i + s_q + [fq1, t0 + h, ncross, tlast] + acc
-
-
-def _lpf_step(Phi, Gam, s, uin):
-    return [Phi[0][0] * s[0] + Phi[0][1] * s[1] + Gam[0] * uin,
-            Phi[1][0] * s[0] + Phi[1][1] * s[1] + Gam[1] * uin]
 
 
 from ..compiled import StepModel  # noqa: E402

@@ -13,10 +13,11 @@ with the drive displacement as phase reference (``X = A`` real):
 
   (first order in the envelope: its amplitude response is within 1e-4 of the second-order
   mode's, see the tests); ``rho = min(1, A / A_floor)`` is the carrier normaliser's floor:
-  below it the carrier shrinks with the pickoff (:meth:`fmvmg_sim.diagram.Diagram.normaliser_floor_V`);
+  below it the carrier shrinks with the pickoff (:attr:`fmvmg_sim.amplitude_loop.AmplitudeLoop.floor_V`);
 * rectifier + LPF (4): the LPF driven by the describing function ``(2/pi) G_r |H_dx H_ps| A``;
 * comparator and PI: ``u = Kp (Vref - r) + Ki I``, clamped, the integrator held while the error
-  pushes further into the clamp (:meth:`blocks.PIController.clamp_state`);
+  pushes further into the clamp (:meth:`blocks.PIController.clamp_state`); these rows are the
+  amplitude loop's envelope face (:meth:`fmvmg_sim.amplitude_loop.AmplitudeLoop.envelope_rows`);
 * sense mode: the resonator's exact envelope face (:meth:`blocks.TwoModeResonator.envelope_mode`),
   ``Y = Y_s + d F_y``, ``Y_s' = s_1 Y_s + r F_y``, ``F_y = -(2 m_c W + c_q) i w A - k_q A + F_noise``;
 * sense chain ``V_s = H_se (K_sy Y + (C_ft/C_f) V_ac) + noise`` and the output LPF applied to
@@ -46,6 +47,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..amplitude_loop import CONTROLLER_FIELDS
 from ..averaged import carrier_phasors, ripple_feedback, steady_state
 from ..numerics.discretize import batched_factor, foh, noise_covariance
 from ..numerics.layout import Layout
@@ -87,7 +89,7 @@ PARAMS = Layout(
     [(piece_field(name, piece, level), shape) for level in LEVELS for piece in PIECES for name, shape in _PIECE_FIELDS]
     + [
         ("L", (N, N_NOISE)),
-        ("vref0", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
+    ] + CONTROLLER_FIELDS + [  # the amplitude loop's set-point and PI (fmvmg_sim.amplitude_loop)
         ("R_I", (2,)), ("R_Q", (2,)), ("g_out", ()), ("h", ()),
         ("omega", ()), ("b_u", ()), ("b_A", ()), ("b_Y", (2,)), ("k_quad", ()),
         ("y_A", (2,)), ("a_floor", ()),
@@ -149,10 +151,8 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict, extension=None) ->
     fA_held = -Zd / Dd                  # PI clamped: no ripple reaches the modulator
     kap0 = -(r.k_quad_N_per_m + 1j * w * r.c_quad_N_s_per_m) / Dd
     kapW = (2j * w * r.m_coriolis_kg) / Dd
-    k_r = dg.rectifier.describing_gain() * abs(Hx * Hps)
-    lp = dg.amplitude_lpf.linear_model()
-    Al, Bl = np.asarray(lp.A), np.asarray(lp.B)[:, 0]
-    kp, ki = dg.pi.kp, dg.pi.ki_per_s
+    loop = dg.amplitude_loop.envelope_rows(Hx * Hps)
+    k_r, Al, Bl, kp, ki = loop.sensor_gain, loop.A, loop.B, loop.kp, loop.ki
     # sense mode: Y = Y_s + d F_y, Y_s' = s1 Y_s + r F_y; F_y = fyA A + fyW (W A) - (dkq A) + F_noise
     s1, rs, ds = r.envelope_mode("sense", w)
     fyA = -r.c_quad_N_s_per_m * 1j * w - r.k_quad_N_per_m
@@ -191,7 +191,7 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict, extension=None) ->
         # keeps or drops what it gathered, by the anti-windup rule), its integral
         M[IS1:IS2 + 1, IA] = Bl * k_r
         M[IS1:IS2 + 1, IS1:IS2 + 1] = Al
-        Bc[IS1:IS2 + 1] = Bl * dg.rectifier.offset_V
+        Bc[IS1:IS2 + 1] = Bl * loop.offset_V
         M[II, IS1] = -1.0
         Bu[II, 0] = 1.0
         M[IJ, IS1] = 1.0
@@ -252,12 +252,12 @@ def operating_params(dg: Diagram, h_s: float, noise_on: dict, extension=None) ->
     else:
         Q, L = extension.noise(M_free, Gn, q, h_s, ctx)
     # the carrier normaliser's floor as a drive amplitude: below it the carrier is (Vdac / floor) v_ps
-    a_floor = dg.normaliser_floor_V() * abs(C0) / (dg.vdac_V * abs(Hx * Hps))
+    a_floor = dg.amplitude_loop.floor_drive_amplitude_m(C0, Hx * Hps)
     x_ss, _ = steady_vector(dg)
     if extension is not None:
         x_ss = extension.steady(x_ss, ctx)
     # frequency: theta' = Im[(u f_c + f_A A + kappa Y)/D_d]
-    out.update(L=L, vref0=dg.vref_V, kp=kp, ki=ki, u_min=dg.pi.u_min_V, u_max=dg.pi.u_max_V,
+    out.update(L=L, **dg.amplitude_loop.controller_params(),
                R_I=[ss.R_I.real, ss.R_I.imag], R_Q=[ss.R_Q.real, ss.R_Q.imag],
                g_out=0.5 * dg.output_lpf.gain * dg.demodulator.k_per_V, h=h_s,
                omega=w, b_u=fu.imag, b_A=fA.imag, b_Y=list(_cmat(kap0)[1]), k_quad=r.k_quad_N_per_m,
@@ -309,9 +309,9 @@ def steady_vector(dg: Diagram, rate_rad_s: float = 0.0, vref_factor: float = 1.0
     Ys = ss.Y - ds * F  # the slow part: the steady sense phasor less the feedthrough
     x = np.zeros(N)
     x[IA] = A
-    x[IS1] = dg.rectifier.describing_gain() * ss.v_ps_amplitude_V + dg.rectifier.offset_V
-    ki = dg.pi.ki_per_s
-    x[II] = (min(ss.agc_effort_V, dg.pi.u_max_V) if ss.agc_saturated else ss.agc_effort_V) / ki if ki > 0 else 0.0
+    loop = dg.amplitude_loop
+    x[IS1] = loop.detector_level_V(ss.v_ps_amplitude_V)
+    x[II] = loop.integrator_state(min(ss.agc_effort_V, dg.pi.u_max_V) if ss.agc_saturated else ss.agc_effort_V)
     x[IYR], x[IYI] = Ys.real, Ys.imag
     x[ISR], x[ISI] = ss.V_s.real, ss.V_s.imag
     return x, ss

@@ -20,9 +20,10 @@ import numpy as np
 from blocks import PIController
 from blocks.ops import numpy_ops
 
-from ..carrier.step import N_CORE, _lpf_step
+from ..amplitude_loop import CONTROLLER_FIELDS, MODULATOR_FIELDS, SMOOTHING_FIELDS, AmplitudeLoopStep
+from ..carrier.step import N_CORE
 from ..compiled import StepModel
-from ..numerics.layout import Layout, dot, matvec
+from ..numerics.layout import Layout, dot, lpf_step as _lpf_step, matvec
 
 #: Per-step draws: real and imaginary parts of the four white noises' complex envelopes.
 N_NOISE_ENV = 8
@@ -40,9 +41,8 @@ PARAMS = Layout([
     ("C_vx", (N_CORE,)), ("C_vs", (N_CORE,)),
     ("f_free", ()), ("k_vco", ()), ("pd_cos", ()), ("pd_sin", ()), ("k_amp", ()),
     ("Phi_pd", (2, 2)), ("Gam_pd", (2,)), ("kp_pll", ()), ("ki_pll", ()), ("v_min", ()), ("v_max", ()),
-    ("Phi_amp", (2, 2)), ("Gam_amp", (2,)),
-    ("vref", ()), ("kp", ()), ("ki", ()), ("u_min", ()), ("u_max", ()),
-    ("k_mod", ()), ("vdac", ()), ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
+] + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the amplitude loop's
+    ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
     ("Phi_out", (2, 2)), ("Gam_out", (2,)),
     ("h", ()),
 ])
@@ -98,7 +98,8 @@ def step(x, p, w, ops=numpy_ops):
     u, v_tune = S(x, "u"), S(x, "v_tune")
     omega = 2 * np.pi * (P(p, "f_free") + P(p, "k_vco") * v_tune)
     dw = omega - P(p, "w0")
-    a = P(p, "k_mod") * u * P(p, "vdac")
+    agc = AmplitudeLoopStep(PARAMS, p)
+    a = agc.modulator_gain(u, P(p, "vdac"))
     Phi = P(p, "Phi")
     yr, yi = matvec(Phi, S(x, "zr")), matvec(Phi, S(x, "zi"))
     Gr, Gi, Gr_w, Gi_w = P(p, "Gr"), P(p, "Gi"), P(p, "Gr_w"), P(p, "Gi_w")
@@ -117,9 +118,7 @@ def step(x, p, w, ops=numpy_ops):
     s_pd = _lpf_step(P(p, "Phi_pd"), P(p, "Gam_pd"), S(x, "s_pd"), 0.5 * (S(x, "pd") + pd1))
     loop = PIController(kp=P(p, "kp_pll"), ki_per_s=P(p, "ki_pll"), u_min_V=P(p, "v_min"), u_max_V=P(p, "v_max"))
     integ_pll1, v_tune1 = loop.carrier_step(S(x, "integ_pll"), s_pd[0], h, ops)
-    s_amp = _lpf_step(P(p, "Phi_amp"), P(p, "Gam_amp"), S(x, "s_amp"), 0.5 * (S(x, "amp") + amp1))
-    agc = PIController(kp=P(p, "kp"), ki_per_s=P(p, "ki"), u_min_V=P(p, "u_min"), u_max_V=P(p, "u_max"))
-    integ1, u1 = agc.carrier_step(S(x, "integ"), P(p, "vref") - s_amp[0], h, ops)
+    s_amp, integ1, u1 = agc.regulate(S(x, "s_amp"), S(x, "integ"), 0.5 * (S(x, "amp") + amp1), h, ops)
     s_i = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_i"), 0.5 * (S(x, "ri") + ri1))
     s_q = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_q"), 0.5 * (S(x, "rq") + rq1))
     acc = [S(x, "acc_rate") + s_i[0], S(x, "acc_quad") + s_q[0], S(x, "acc_amp") + s_amp[0], S(x, "acc_u") + u1,

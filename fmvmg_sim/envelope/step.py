@@ -18,9 +18,9 @@ sense loop (:mod:`fmvmg_sim.envelope.rebalance`) has more states and reads its o
 
 from __future__ import annotations
 
-from blocks import PIController
 from blocks.ops import numpy_ops
 
+from ..amplitude_loop import AmplitudeLoopStep
 from ..numerics.layout import Layout, dot, matvec
 from ..compiled import Refinement, StepModel
 from .model import IA, II, IJ, IJI, IJR, IK, IS1, IYI, IYR, N, N_NOISE, N_SUB, PARAMS, piece_field
@@ -71,23 +71,19 @@ class EnvelopeStep:
         #: reference phase (rad) at its end.
         self.inputs = Layout([("noise", (n - 1,)), ("rate", (2,)), ("vref_f", (2,)), ("quad_rel", (2,)), ("phase", ())])
 
-    def _pi(self, p):
-        P = self.params.unpack
-        return PIController(kp=P(p, "kp"), ki_per_s=P(p, "ki"), u_min_V=P(p, "u_min"), u_max_V=P(p, "u_max"))
+    def _loop(self, p):
+        """The amplitude loop's step face on this step's parameters."""
+        return AmplitudeLoopStep(self.params, p)
 
     def _pi_state(self, p, x, v):
         """Unclamped PI output, its clamp state (high, low, integrator held) at state ``x`` and set-point ``v``."""
-        e = v - x[IS1]
-        pi = self._pi(p)
-        u_free = pi.kp * e + pi.ki_per_s * x[II]
-        high, low, hold = pi.clamp_state(u_free, e)
-        return u_free, 1.0 * high, 1.0 * low, 1.0 * hold
+        return self._loop(p).clamp_state(x[IS1], x[II], v)
 
     def _hold_inputs(self, p, w, x, f0, f1):
         """The set-point and the first-order-hold input vectors at fractions ``f0`` and ``f1`` of the step."""
         S, P = self.inputs.unpack, self.params.unpack
         rate, fac, quad = S(w, "rate"), S(w, "vref_f"), S(w, "quad_rel")
-        vref0, kq = P(p, "vref0"), P(p, "k_quad")
+        vref0, kq = P(p, "vref"), P(p, "k_quad")
         yA = P(p, "y_A")
         A = x[IA]
         Yr, Yi = x[IYR] + yA[0] * A, x[IYI] + yA[1] * A  # the sense mode as the pickoff sees it (slow part + feedthrough)
@@ -109,9 +105,7 @@ class EnvelopeStep:
     def _u_integral(self, p, x, x1, v0, v1, clamped, U, dt, ops):
         """The PI output's integral over a step from ``x`` to ``x1``: the held limit, or Kp (Vref - r) + Ki I
         integrated exactly through the integrals J (of r) and K (of I)."""
-        P = self.params.unpack
-        free = P(p, "kp") * (0.5 * (v0 + v1) * dt - (x1[IJ] - x[IJ])) + P(p, "ki") * (x1[IK] - x[IK])
-        return ops.if_else(clamped > 0, U * dt, free)
+        return self._loop(p).effort_integral(v0, v1, dt, x1[IJ] - x[IJ], x1[IK] - x[IK], clamped, U, ops)
 
     def channels(self, p, x1, inv_t, rate_V, quad_V, ops):
         """The rate and quadrature outputs of a sample from the open chain's (a closed sense loop reads its own).
@@ -162,8 +156,7 @@ class EnvelopeStep:
         return [ops.if_else(first, 0.0, x[i]) if i in self.integrals else x[i] for i in range(self.n)]
 
     def _clamp(self, u, p, ops):
-        P = self.params.unpack
-        return ops.fmin(ops.fmax(u, P(p, "u_min")), P(p, "u_max"))
+        return self._loop(p).clamp(u, ops)
 
     def step(self, xs, p, w, ops=numpy_ops):
         """Advance the averaged model by one step in the piece it starts in; flag a change of piece.
@@ -187,10 +180,10 @@ class EnvelopeStep:
         P = self.params.unpack
         x = self._restart(xs, ops)
         fac = self.inputs.unpack(w, "vref_f")
-        v0, v1 = P(p, "vref0") * fac[0], P(p, "vref0") * fac[1]
+        v0, v1 = P(p, "vref") * fac[0], P(p, "vref") * fac[1]
         _, high0, low0, hold0 = self._pi_state(p, x, v0)
         sat0 = high0 + low0
-        U = ops.if_else(high0, P(p, "u_max"), P(p, "u_min"))
+        U = self._loop(p).limit(high0, ops)
         in0, in1 = self._hold_inputs(p, w, x, 0, 1)
         ln = matvec(P(p, "L"), self.inputs.unpack(w, "noise"))
         free = self._piece(p, "free", "step", x, in0, in1)
@@ -231,11 +224,11 @@ class EnvelopeStep:
         x = self._restart(xs, ops)
         f0, f1 = j * (1.0 / N_SUB), (j + 1.0) * (1.0 / N_SUB)
         fac = self.inputs.unpack(w, "vref_f")
-        vref0 = P(p, "vref0")
+        vref0 = P(p, "vref")
         v0, v1 = vref0 * _at(fac, f0), vref0 * _at(fac, f1)
         u_free0, high0, low0, hold0 = self._pi_state(p, x, v0)
         sat0 = high0 + low0
-        U = ops.if_else(high0, P(p, "u_max"), P(p, "u_min"))
+        U = self._loop(p).limit(high0, ops)
         in0, in1 = self._hold_inputs(p, w, x, f0, f1)
         af = P(p, "a_floor")
 

@@ -108,3 +108,25 @@ def dot(a, b):
     object
     """
     return sum((a[j] * b[j] for j in range(1, len(a))), a[0] * b[0])
+
+
+def lpf_step(Phi, Gam, s, uin):
+    """One exact step of a two-state filter ``s+ = Phi s + Gam uin`` (lists of rows), written out.
+
+    Parameters
+    ----------
+    Phi : list of list
+        2x2 transition matrix.
+    Gam : list
+        Input column (2 values).
+    s : list
+        The filter's two states.
+    uin : object
+        Its input, held over the step.
+
+    Returns
+    -------
+    list
+    """
+    return [Phi[0][0] * s[0] + Phi[0][1] * s[1] + Gam[0] * uin,
+            Phi[1][0] * s[0] + Phi[1][1] * s[1] + Gam[1] * uin]

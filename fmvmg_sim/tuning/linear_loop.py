@@ -201,7 +201,7 @@ def plant_parameters(dg: Diagram) -> PlantParameters:
         pole = 0.0
     else:  # pragma: no cover - the device schema allows only the two
         raise ValueError(f"unknown carrier mode {dg.carrier_mode!r}")
-    sensor = dg.rectifier.describing_gain() * abs(Hx * Hps)
+    sensor = dg.amplitude_loop.sensor_gain(Hx * Hps)
     return PlantParameters(
         temperature_C=dg.temperature_C, carrier_mode=dg.carrier_mode, omega_rad_s=w, q_drive=r.q_drive,
         tau_d_s=tau, plant_pole_rad_s=pole, b_m_per_V_s=float(b), amplitude_m=ss.amplitude_m,

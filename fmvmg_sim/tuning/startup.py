@@ -7,18 +7,19 @@ dynamics of :mod:`.linear_loop` made nonlinear where the loop is:
 
 * ``A' = -A/tau_d + b(A) u``: for the 'normalized' carrier ``b(A) = b min(1, a(A)/floor)``
   because the carrier normaliser divides by ``max(sqrt(v_x^2 + v_ps^2), floor)``
-  (floor = :data:`fmvmg_sim.carrier.plan.NORMALISER_FLOOR` times the steady ``v_ps``
+  (floor = :data:`fmvmg_sim.amplitude_loop.NORMALISER_FLOOR_REL` times the steady ``v_ps``
   amplitude); for the 'pickoff' carrier ``b(A) = b A / A_0``;
-* the rectifier and low-pass: ``r`` = low-pass of ``sensor_gain * A`` (+ rectifier offset);
-* the PI: :meth:`blocks.PIController.carrier_step`, the same clamp and conditional
+* the rectifier by its describing function, ``sensor_gain * A`` (+ rectifier offset);
+* the low-pass, comparator and PI: the amplitude loop's step face
+  (:meth:`fmvmg_sim.amplitude_loop.AmplitudeLoop.regulator`), the same clamp and conditional
   integration the carrier engine runs.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
+from ..amplitude_loop import NORMALISER_FLOOR_REL
 from ..diagram import Diagram
 from .linear_loop import PlantParameters, plant_parameters, with_gains
 
@@ -44,21 +45,16 @@ def averaged_startup(dg: Diagram, kp: float, ki_per_s: float, duration_s: float,
     dict
         ``t_s``, ``r_V``, ``u_V``, ``amplitude_m`` arrays and ``vref_V``.
     """
-    from ..carrier.plan import NORMALISER_FLOOR
     p = params or plant_parameters(dg)
-    pi = with_gains(dg, kp, ki_per_s)
     n = int(np.ceil(duration_s / step_s))
     h = step_s
-    lpf = dg.amplitude_lpf.linear_model()
-    Al, Bl = np.asarray(lpf.A), np.asarray(lpf.B)
-    E = scipy.linalg.expm(np.block([[Al, Bl], [np.zeros((1, Al.shape[0] + 1))]]) * h)
-    Phi_l, Gam_l = E[:2, :2], E[:2, 2]
+    loop = dg.amplitude_loop.regulator(h, with_gains(dg, kp, ki_per_s))
     decay = np.exp(-p.plant_pole_rad_s * h)
     gain_h = (1 - decay) / p.plant_pole_rad_s if p.plant_pole_rad_s > 0 else h
     w = p.omega_rad_s
     chain_m = abs(dg.drive_chain_response(w))          # |v_x| per metre
     vps_m = abs(dg.drive_chain_response(w) * dg.phase_shifter_response(w))
-    floor_V = NORMALISER_FLOOR * vps_m * p.amplitude_m
+    floor_V = NORMALISER_FLOOR_REL * vps_m * p.amplitude_m
     offset = dg.rectifier.offset_V
     A, s, integ, u = float(amplitude0_m), np.zeros(2), 0.0, 0.0
     t_out = (np.arange(n) + 1) * h
@@ -72,9 +68,6 @@ def averaged_startup(dg: Diagram, kp: float, ki_per_s: float, duration_s: float,
         else:
             bA = p.b_m_per_V_s * A / p.amplitude_m
         A = A * decay + bA * u * gain_h
-        rect = p.sensor_gain_V_per_m * A + offset
-        s = Phi_l @ s + Gam_l * rect
-        e = dg.vref_V - s[0]
-        integ, u = pi.carrier_step(integ, e, h)
+        s, integ, u = loop.regulate(s, integ, p.sensor_gain_V_per_m * A + offset, h)
         r_out[k], u_out[k], a_out[k] = s[0], u, A
     return dict(t_s=t_out, r_V=r_out, u_V=u_out, amplitude_m=a_out, vref_V=dg.vref_V)
