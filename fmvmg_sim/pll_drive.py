@@ -26,6 +26,48 @@ from blocks.phase_detector import QuadratureDetector
 
 from .diagram import CORE_OUTPUTS, Diagram, build_diagram, design_phase_trim
 from .device import Device
+from .numerics.layout import lpf_step
+
+
+#: The phase loop's fields in a step's parameters (every model that runs the PLL): the oscillator's free frequency
+#: and gain, the phase detector's trim (cos, sin) and amplitude gain, the detector's low-pass discretised for the
+#: step, and the loop filter (PI gains and output clamp).
+PHASE_LOOP_FIELDS = [
+    ("f_free", ()), ("k_vco", ()), ("pd_cos", ()), ("pd_sin", ()), ("k_amp", ()),
+    ("Phi_pd", (2, 2)), ("Gam_pd", (2,)), ("kp_pll", ()), ("ki_pll", ()), ("v_min", ()), ("v_max", ()),
+]
+
+
+def regulate_phase(P, p, s_pd, integ, pd, h, ops):
+    """The phase loop over one step: the detector's low-pass driven by the step's phase reading ``pd``, then the
+    loop filter (PI, clamped, anti-windup) on its output.
+
+    Parameters
+    ----------
+    P : callable
+        ``P(p, name)`` reads a field of :data:`PHASE_LOOP_FIELDS` from the packed parameters.
+    p : sequence
+        The step's packed parameters (numbers or CasADi symbols).
+    s_pd : sequence
+        The low-pass's two states at the start of the step.
+    integ : float or symbol
+        The loop filter's integrator.
+    pd : float or symbol
+        The phase detector's reading over the step.
+    h : float or symbol
+        Step length (s).
+    ops : object
+        Math backend.
+
+    Returns
+    -------
+    tuple
+        ``(s_pd, integ, v_tune)`` at the end of the step.
+    """
+    s_pd1 = lpf_step(P(p, "Phi_pd"), P(p, "Gam_pd"), s_pd, pd)
+    loop = PIController(kp=P(p, "kp_pll"), ki_per_s=P(p, "ki_pll"), u_min_V=P(p, "v_min"), u_max_V=P(p, "v_max"))
+    integ1, v_tune1 = loop.carrier_step(integ, s_pd1[0], h, ops)
+    return s_pd1, integ1, v_tune1
 
 
 @dataclass

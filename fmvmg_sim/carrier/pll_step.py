@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from blocks import Multiplier, PIController
+from blocks import Multiplier
 from blocks.nco import ControlledOscillator
 from blocks.ops import numpy_ops
 from blocks.phase_detector import QuadratureDetector
 
 from ..amplitude_loop import CONTROLLER_FIELDS, MODULATOR_FIELDS, SMOOTHING_FIELDS, AmplitudeLoopStep
 from ..compiled import StepModel
+from ..pll_drive import PHASE_LOOP_FIELDS, regulate_phase
 from ..numerics.layout import Layout, dot, lpf_step as _lpf_step, matvec
 from .step import N_CORE, N_NOISE
 
@@ -36,9 +37,7 @@ PARAMS = Layout([
     ("Phi", (N_CORE, N_CORE)), ("G", (N_CORE, 2)), ("G_w", (N_CORE, 2)), ("w0", ()),
     ("Gam_fx", (N_CORE,)), ("Gam_w", (N_CORE, N_NOISE)),
     ("C_vx", (N_CORE,)), ("C_vs", (N_CORE,)), ("off_vx", ()), ("off_vs", ()),
-    ("f_free", ()), ("k_vco", ()), ("pd_cos", ()), ("pd_sin", ()), ("k_amp", ()),
-    ("Phi_pd", (2, 2)), ("Gam_pd", (2,)), ("kp_pll", ()), ("ki_pll", ()), ("v_min", ()), ("v_max", ()),
-] + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the amplitude loop's
+] + PHASE_LOOP_FIELDS + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the two loops'
     ("quad_coef", ()), ("vdc2", ()),
     ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
     ("Phi_out", (2, 2)), ("Gam_out", (2,)),
@@ -91,9 +90,7 @@ def step(x, p, w, ops=numpy_ops):
     pc, ps = P(p, "pd_cos"), P(p, "pd_sin")  # the detector's trim as cos and sin
     pd, amp = det.carrier_mean(vx0, vx1, c0 * pc - s0 * ps, s0 * pc + c0 * ps, c1 * pc - s1 * ps,
                                s1 * pc + c1 * ps)
-    s_pd = _lpf_step(P(p, "Phi_pd"), P(p, "Gam_pd"), S(x, "s_pd"), pd)
-    loop = PIController(kp=P(p, "kp_pll"), ki_per_s=P(p, "ki_pll"), u_min_V=P(p, "v_min"), u_max_V=P(p, "v_max"))
-    integ_pll1, v_tune1 = loop.carrier_step(S(x, "integ_pll"), s_pd[0], h, ops)
+    s_pd, integ_pll1, v_tune1 = regulate_phase(P, p, S(x, "s_pd"), S(x, "integ_pll"), pd, h, ops)
     s_amp, integ1, u1 = agc.regulate(S(x, "s_amp"), S(x, "integ"), amp, h, ops)
     # --- rate and quadrature demodulated against the oscillator --------------------------------------
     c, s = P(p, "cos_ref"), P(p, "sin_ref")

@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from blocks import PIController
 from blocks.ops import numpy_ops
 
 from ..amplitude_loop import CONTROLLER_FIELDS, MODULATOR_FIELDS, SMOOTHING_FIELDS, AmplitudeLoopStep
 from ..carrier.step import N_CORE
 from ..compiled import StepModel
+from ..pll_drive import PHASE_LOOP_FIELDS, regulate_phase
 from ..numerics.layout import Layout, dot, lpf_step as _lpf_step, matvec
 
 #: Per-step draws: real and imaginary parts of the four white noises' complex envelopes.
@@ -39,9 +39,7 @@ PARAMS = Layout([
     ("Phi", (N_CORE, N_CORE)), ("Gr", (N_CORE,)), ("Gi", (N_CORE,)), ("Gr_w", (N_CORE,)), ("Gi_w", (N_CORE,)),
     ("w0", ()), ("Nr", (N_CORE, 4)), ("Ni", (N_CORE, 4)),
     ("C_vx", (N_CORE,)), ("C_vs", (N_CORE,)),
-    ("f_free", ()), ("k_vco", ()), ("pd_cos", ()), ("pd_sin", ()), ("k_amp", ()),
-    ("Phi_pd", (2, 2)), ("Gam_pd", (2,)), ("kp_pll", ()), ("ki_pll", ()), ("v_min", ()), ("v_max", ()),
-] + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the amplitude loop's
+] + PHASE_LOOP_FIELDS + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the two loops'
     ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
     ("Phi_out", (2, 2)), ("Gam_out", (2,)),
     ("h", ()),
@@ -115,9 +113,7 @@ def step(x, p, w, ops=numpy_ops):
     zi1 = [cr * yi[k] - sr * yr[k] + ni[k] + nr2[k] for k in range(N_CORE)]
     pd1, amp1, ri1, rq1 = detector_readings(zr1, zi1, p, ops)
     # step means by the trapezoid rule, as the carrier step's demodulators take them
-    s_pd = _lpf_step(P(p, "Phi_pd"), P(p, "Gam_pd"), S(x, "s_pd"), 0.5 * (S(x, "pd") + pd1))
-    loop = PIController(kp=P(p, "kp_pll"), ki_per_s=P(p, "ki_pll"), u_min_V=P(p, "v_min"), u_max_V=P(p, "v_max"))
-    integ_pll1, v_tune1 = loop.carrier_step(S(x, "integ_pll"), s_pd[0], h, ops)
+    s_pd, integ_pll1, v_tune1 = regulate_phase(P, p, S(x, "s_pd"), S(x, "integ_pll"), 0.5 * (S(x, "pd") + pd1), h, ops)
     s_amp, integ1, u1 = agc.regulate(S(x, "s_amp"), S(x, "integ"), 0.5 * (S(x, "amp") + amp1), h, ops)
     s_i = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_i"), 0.5 * (S(x, "ri") + ri1))
     s_q = _lpf_step(P(p, "Phi_out"), P(p, "Gam_out"), S(x, "s_q"), 0.5 * (S(x, "rq") + rq1))
