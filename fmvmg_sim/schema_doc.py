@@ -61,7 +61,7 @@ MEANINGS = {
     "thermal.q_anchor": "anchor-loss Q",
     "thermal.q_gas_exponent": "gas-damping Q ~ T^-n exponent",
     "thermal.quadrature_tc_per_K": "quadrature temperature coefficient",
-    "thermal.q_extra_tc_per_K": "extra linear Q drift (the `q_factor_drift` effect)",
+    "thermal.q_extra_tc_per_K": "extra Q drift, Q x exp(tc (T - T0)) (the `q_factor_drift` effect)",
     "thermal.q_curvature_per_K2": "curvature of the Q law: ln Q gains this times (T - T0)^2",
     "thermal.split_extra_Hz_per_K": "extra mode-split drift (the `mode_split_drift` effect)",
     "circuit.drive_pickoff.bias_V": "proof-mass bias of the drive pickoff",

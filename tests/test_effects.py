@@ -63,10 +63,23 @@ def test_effects_fold_into_the_temperature_laws():
                                      "demod_phase_drift": {"kappa_urad_per_K": 100.0}}, "effects"))
     dev = fx.apply_to_device(base.device)
     op0, op1 = base.device.at(65.0), dev.at(65.0)
-    assert op1["mechanics"]["q_drive"] / op0["mechanics"]["q_drive"] == pytest.approx(1 - 0.005 * 40, rel=1e-12)
+    assert op1["mechanics"]["q_drive"] / op0["mechanics"]["q_drive"] == pytest.approx(np.exp(-0.005 * 40), rel=1e-12)
     assert op1["mechanics"]["f_sense_Hz"] - op0["mechanics"]["f_sense_Hz"] == pytest.approx(2.0, rel=1e-3)
     d0, d1 = build_diagram(base.device, 65.0), build_diagram(dev, 65.0)
     assert d1.phase_trim_rad - d0.phase_trim_rad == pytest.approx(100e-6 * 40, rel=1e-12)
+
+
+def test_q_drift_keeps_q_positive_over_its_whole_range():
+    # the strongest drift the effect allows, 65 K from the reference: Q shrinks by exp(-3.25), a factor 1 + tc dT
+    # would have made it negative (and the averaged model unstable)
+    base = load_scenario_named("static_25C")
+    lo = MODELS["q_factor_drift"]["q_tc_per_K"].lo
+    dev = EffectSet(validate_effects({"q_factor_drift": {"q_tc_per_K": lo}}, "effects")).apply_to_device(base.device)
+    for T in (-40.0, 85.0):
+        q0, q1 = base.device.at(T)["mechanics"], dev.at(T)["mechanics"]
+        for m in ("q_drive", "q_sense"):
+            assert q1[m] > 0 and q1[m] / q0[m] == pytest.approx(np.exp(lo * (T - 25.0)), rel=1e-12)
+    assert steady_state(build_diagram(dev, 85.0)).amplitude_m > 0
 
 
 def load_scenario_named(name, **kw):

@@ -85,8 +85,8 @@ SHA256 = {
     ("tune_startup", "envelope"): "c237b60509475615d8917cd17af91a803a7957ff18aacee3d2acf32d56858733",
     ("tune_step", "carrier"): "62be746fab3ae692a91bcbf23835f391370d5cc29550f3e7b5fbd9cfa0dddb18",
     ("tune_step", "envelope"): "229ea846ae06bc51dd27b97b5d1360c3d425949ebc9ab8f8531624e0742d4019",
-    ("effects_ramp", "carrier"): "58a9521fe0fcb632a9b3dee523d1b5f03236889f799b790289e60182480a9cce",
-    ("effects_ramp", "envelope"): "87d28416ed0d099aea9fb06d93dccb9ee4745bb521cade3e46c9fe6d0b8c5f2d",
+    ("effects_ramp", "carrier"): "ae6edf33c7b1b3c4a8be69c20fdc577f50e6aa653f0f698b8ada149a8f060dc6",
+    ("effects_ramp", "envelope"): "99ce4b8661e62368bc1ba46d137f8cb562eace034ee7c9dabbdaf8c8f9e1ea53",
 }
 
 
