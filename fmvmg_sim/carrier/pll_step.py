@@ -24,7 +24,7 @@ from ..amplitude_loop import CONTROLLER_FIELDS, MODULATOR_FIELDS, SMOOTHING_FIEL
 from ..compiled import StepModel
 from ..pll_drive import PHASE_LOOP_FIELDS, regulate_phase
 from ..numerics.layout import Layout, dot, lpf_step as _lpf_step, matvec
-from .step import N_CORE, N_NOISE
+from .step import N_CORE, N_NOISE, OUTPUT_FIELDS
 
 STATE = Layout([
     ("z", (N_CORE,)), ("theta", ()), ("s_pd", (2,)), ("integ_pll", ()), ("v_tune", ()),
@@ -39,10 +39,7 @@ PARAMS = Layout([
     ("C_vx", (N_CORE,)), ("C_vs", (N_CORE,)), ("off_vx", ()), ("off_vs", ()),
 ] + PHASE_LOOP_FIELDS + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the two loops'
     ("quad_coef", ()), ("vdc2", ()),
-    ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
-    ("Phi_out", (2, 2)), ("Gam_out", (2,)),
-    ("h", ()),
-])
+] + OUTPUT_FIELDS + [("h", ())])
 
 
 def step(x, p, w, ops=numpy_ops):

@@ -32,16 +32,17 @@ STATE = Layout([
     ("acc_rate", ()), ("acc_quad", ()), ("acc_amp", ()), ("acc_u", ()),
 ])
 
+#: The sense output's fields in a step's parameters (every carrier-family step): the demodulation reference's phase
+#: as cos and sin, the demodulator's gain and the output low-pass discretised for the step.
+OUTPUT_FIELDS = [("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()), ("Phi_out", (2, 2)), ("Gam_out", (2,))]
+
 PARAMS = Layout([
     ("Phi", (N_CORE, N_CORE)), ("Phi_g", (N_CORE, N_CORE)), ("g0", ()),
     ("Gam_fx", (N_CORE,)), ("Gam_w", (N_CORE, N_NOISE)),
     ("C_vx", (N_CORE,)), ("C_vps", (N_CORE,)), ("C_vs", (N_CORE,)), ("off_vx", ()), ("off_vps", ()), ("off_vs", ()),
 ] + CARRIER_FIELDS + [  # the amplitude loop's (fmvmg_sim.amplitude_loop)
     ("quad_coef", ()), ("vdc2", ()),
-    ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
-    ("Phi_out", (2, 2)), ("Gam_out", (2,)),
-    ("h", ()),
-])
+] + OUTPUT_FIELDS + [("h", ())])
 
 
 def step(x, p, w, ops=numpy_ops, dz=None):
@@ -118,4 +119,4 @@ from ..compiled import StepModel  # noqa: E402
 CARRIER_MODEL = StepModel("fmvmg_carrier", STATE, PARAMS, N_NOISE, step,
                           reset=("acc_rate", "acc_quad", "acc_amp", "acc_u"))
 
-__all__ = ["STATE", "PARAMS", "N_CORE", "N_NOISE", "step", "CARRIER_MODEL"]
+__all__ = ["STATE", "PARAMS", "OUTPUT_FIELDS", "N_CORE", "N_NOISE", "step", "CARRIER_MODEL"]

@@ -20,7 +20,7 @@ import numpy as np
 from blocks.ops import numpy_ops
 
 from ..amplitude_loop import CONTROLLER_FIELDS, MODULATOR_FIELDS, SMOOTHING_FIELDS, AmplitudeLoopStep
-from ..carrier.step import N_CORE
+from ..carrier.step import N_CORE, OUTPUT_FIELDS
 from ..compiled import StepModel
 from ..pll_drive import PHASE_LOOP_FIELDS, regulate_phase
 from ..numerics.layout import Layout, dot, lpf_step as _lpf_step, matvec
@@ -40,10 +40,7 @@ PARAMS = Layout([
     ("w0", ()), ("Nr", (N_CORE, 4)), ("Ni", (N_CORE, 4)),
     ("C_vx", (N_CORE,)), ("C_vs", (N_CORE,)),
 ] + PHASE_LOOP_FIELDS + SMOOTHING_FIELDS + CONTROLLER_FIELDS + MODULATOR_FIELDS + [  # the two loops'
-    ("cos_ref", ()), ("sin_ref", ()), ("k_demod", ()),
-    ("Phi_out", (2, 2)), ("Gam_out", (2,)),
-    ("h", ()),
-])
+] + OUTPUT_FIELDS + [("h", ())])
 
 
 def detector_readings(zr, zi, p, ops=numpy_ops):
