@@ -112,6 +112,9 @@ KNOBS: tuple[Knob, ...] = (
        "Q law: exponent n of the gas damping Q_gas ~ T^-n", "q_factor_drift"),
     _k("q_curvature_per_K2", "law", "abs", [("thermal", "q_curvature_per_K2")], 1e-7,
        "Q law: its curvature, ln Q + c (T - T0)^2 (the mix of gas, thermoelastic and anchor losses)"),
+    _k("q_solid_damping_rel", "law", "inv_rel", [("thermal", "q_ted"), ("thermal", "q_anchor")], 0.02,
+       "Q law: the thermoelastic and anchor damping, relative (Q_TED and Q_anchor / (1 + x)): their share of the "
+       "damping beside the gas's, which sets the Q law's shape"),
     _k("gbw_tc_per_K", "law", "abs_all", [("circuit", a, "gbw_tc_per_K") for a in _AMPS], 1e-4,
        "amplifier gain-bandwidth temperature coefficient (every amplifier): their phase drift", "demod_phase_drift"),
     _k("amp_gain_tc_per_K", "law", "abs_all", [("circuit", a, "gain_tc_per_K") for a in _AMPS], 1e-6,

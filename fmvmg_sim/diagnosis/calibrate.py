@@ -15,7 +15,7 @@ import numpy as np
 
 from .fitting import Fitter, Lin, Solution, scaled_inverse
 from ..uncertainty import BOUND_TOLERANCES, KNOBS_BY_NAME
-from .parameters import knob_values
+from .parameters import KnobSet, knob_values
 
 #: Posterior/prior standard-deviation ratio above which a parameter is "not identifiable".
 NOT_IDENTIFIABLE_RATIO = 0.5
@@ -26,6 +26,13 @@ MIN_GAIN_CHI2 = 0.5
 MIN_GAIN_REL = 1e-3
 #: |correlation| above which a pair is flagged as confounded.
 CONFOUND_CORR = 0.95
+#: Exponent of the free-molecular gas damping, Q_gas ~ T^-1/2 (physics.md section 2): the Q law's gas-only form.
+FREE_MOLECULAR_EXPONENT = 0.5
+#: Knobs a calibration from the nominal unit holds at 0 and only the start from the Q law's other form
+#: (:func:`law_starts`) frees: beside the gas exponent the solid damping trades the law's slope along a valley,
+#: and Levenberg-Marquardt steps from the file's mix crawl along it and stop early, short of the fit the file's
+#: mix with its other knobs reaches.
+SHAPE_KNOBS = ("q_solid_damping_rel",)
 
 
 @dataclass
@@ -112,8 +119,51 @@ def _objective(fitter: Fitter, rows: np.ndarray, theta: dict, base, path: dict) 
     return float(np.nansum(r ** 2) + prior @ prior)
 
 
+def law_starts(knobs: KnobSet, device) -> list:
+    """Starting points of the calibration besides the nominal unit: the Q law in its other form.
+
+    The Q law is ``1/Q = 1/Q_gas(T) + 1/Q_solid`` with ``Q_gas ~ T^-n``: its shape, ``ln(s (T/T0)^n + 1 - s)``
+    with ``s`` the gas share of the damping, trades its slope between ``n`` and ``s``, and a calibration from the
+    device file's mix (a steep gas law beside thermoelastic and anchor losses) stops in the valley on that side:
+    its AGC effort (~ 1/Q) then fits the training temperatures with a law of another curvature and misses beyond
+    them. The other form is the gas law alone: the solid damping at the lower end of its knob, the free-molecular
+    exponent (:data:`FREE_MOLECULAR_EXPONENT`), each within its bounds.
+
+    Parameters
+    ----------
+    knobs : KnobSet
+        The knobs calibrated.
+    device : Device
+        The nominal device (its gas exponent).
+
+    Returns
+    -------
+    list of dict
+        ``{knob: deviation}`` starts (empty when the device has no solid-damping knob).
+    """
+    ks = knobs
+    if "q_solid_damping_rel" not in ks.names:
+        return []
+    i = ks.names.index("q_solid_damping_rel")
+    start = {"q_solid_damping_rel": float(ks.lo[i])}
+    if "q_gas_exponent" in ks.names:
+        j = ks.names.index("q_gas_exponent")
+        n0 = float(device.values["thermal"]["q_gas_exponent"])
+        start["q_gas_exponent"] = float(np.clip(FREE_MOLECULAR_EXPONENT - n0, ks.lo[j], ks.hi[j]))
+    return [start]
+
+
+def _hold(lin: Lin, held: list) -> Lin:
+    """``lin`` with the knobs at indices ``held`` bounded at their linearisation point."""
+    if not held:
+        return lin
+    lo, hi = lin.lo.copy(), lin.hi.copy()
+    lo[held] = hi[held] = lin.x0[held]
+    return dataclasses.replace(lin, lo=lo, hi=hi)
+
+
 def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float = 1e-3,
-              refresh: float = 0.05) -> Calibration:
+              refresh: float = 0.05, start: dict | None = None) -> Calibration:
     """Levenberg-Marquardt MAP fit of the nominal knobs on the blocks in ``rows``.
 
     Each step solves the linearised problem (the knobs' sensitivities as response tables), damped, and is taken
@@ -133,6 +183,9 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
         Stop when every step is below ``tol`` times its tolerance, or a step lowers the objective by less than
         :data:`MIN_GAIN_CHI2` or :data:`MIN_GAIN_REL` of it.
     refresh : float, optional
+    start : dict, optional
+        Knob deviations to start from (:func:`law_starts`); default the nominal unit, with the
+        :data:`SHAPE_KNOBS` held there.
 
     Returns
     -------
@@ -141,12 +194,14 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
     knobs = fitter.knobs
     dev = np.array([k.on_device for k in knobs.knobs])
     theta = {n: 0.0 for n in knobs.names}
-    fitter.delay_s = 0.0
+    theta.update({n: float(v) for n, v in (start or {}).items() if n in theta})
+    fitter.delay_s = theta.get("temperature_delay_s", 0.0)
     path = fitter.path(None)
     base = fitter.table(theta)
     jac = fitter.nominal_jacobian(theta, base)
     obj = _objective(fitter, rows, theta, base, path)
-    lin = fitter.nominal_lin(theta, base, path, jac)
+    held = [i for i, n in enumerate(knobs.names) if start is None and n in SHAPE_KNOBS]
+    lin = _hold(fitter.nominal_lin(theta, base, path, jac), held)
     damping, it = 1e-3, 0
     for it in range(1, max_iter + 1):
         sol = fitter.solve(lin, rows, damping=damping)
@@ -169,7 +224,7 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
         if np.max(np.abs(step[dev]), initial=0.0) > refresh:
             fitter._nom_jac = None  # the sensitivities again, where the unit now is
             jac = fitter.nominal_jacobian(theta, base)
-        lin = fitter.nominal_lin(theta, base, path, jac)
+        lin = _hold(fitter.nominal_lin(theta, base, path, jac), held)
     fitter.delay_s = theta.get("temperature_delay_s", 0.0)
     # the linearisation at the calibrated unit: its prediction there is the exact model's, and its solve gives the
     # covariance (not a further step); the cost is the weighted squares there

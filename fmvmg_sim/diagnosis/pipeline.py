@@ -27,7 +27,7 @@ from ..record import Record, read_record
 from ..scenario import load_scenario
 from . import localize as loc
 from .attribution import CandidateFitter, attribute
-from .calibrate import calibrate
+from .calibrate import calibrate, law_starts
 from .data import Prepared, prepare
 from .detection import detection_limits
 from .fitting import Fitter
@@ -156,7 +156,8 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
     its reference is wired): the two combinations that give the quadrature output the record's sign
     (:func:`quadrature_conventions`) turn the demodulated outputs the opposite ways with the phase error, so that
     the bias the quadrature leaks has the one sign or the other. Each is calibrated, and the one that fits the
-    training window better is kept.
+    training window better is kept. The one kept is calibrated again from the Q law's other form
+    (:func:`.calibrate.law_starts`), and the better of the two kept.
 
     Parameters
     ----------
@@ -175,6 +176,11 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
         f = Fitter(prep, dev, quadrature_polarity=polarity)
         cal = calibrate(f, train)
         if best is None or cal.objective < best[1].objective:
+            best = (f, cal)
+    for start in law_starts(best[0].knobs, best[0].device0):
+        f = Fitter(prep, best[0].device0, quadrature_polarity=best[0].quadrature_polarity)
+        cal = calibrate(f, train, start=start)
+        if cal.objective < best[1].objective:
             best = (f, cal)
     f, cal = best
     f.delay_s = cal.theta.get("temperature_delay_s", 0.0)
