@@ -357,7 +357,7 @@ def _make_case(k: int, seed: int, out: Path, scenario_path: str, duration_s: flo
     if ool is not None:
         ool = add_out_of_library(path, ool, target, unit, noise)
     label = {"case": k, "record": str(path), "effects": eff, "nominal_deviation": theta, "quadrature_sign": quad_sign,
-             "amplitude_scale": scales,
+             "amplitude_scale": scales, "at_bound_by_effect": {n: at_bound(drawn[n], n, scales[n]) for n in effects},
              "snr_target": target if effects else 0.0, "snr_by_effect": snr_by,
              "sim_seed": s.seed, "temperature_points": tp, "rate_points": rp,
              "noise_model": {c: list(v) for c, v in zip(CHANNELS, noise) if v is not None}}
@@ -544,6 +544,29 @@ def _scale_to(record_path, scenario_path, device_nominal, theta: dict, drawn: di
         scale, snr = new, s_new
         hist.append((scale, snr))
     return scale, float(snr)
+
+
+def at_bound(params: dict, name: str, scale: float) -> bool:
+    """Whether scaling effect ``name``'s drawn ``params`` by ``scale`` takes an amplitude to its bound.
+
+    There :func:`scaled` clips it, and the signature SNR stays below its target whatever the scale: the record
+    cannot show the effect at that target within its physical range (a hysteresis on a record held at one
+    temperature, say).
+
+    Parameters
+    ----------
+    params : dict
+        The effect's drawn parameters.
+    name : str
+    scale : float
+
+    Returns
+    -------
+    bool
+    """
+    return any(p not in NOT_SCALED and abs(v * scale) > 0.0
+               and not inside(MODELS[name][p])[0] < v * scale < inside(MODELS[name][p])[1]
+               for p, v in params.items())
 
 
 def scaled(effects: dict, scale: float) -> dict:
