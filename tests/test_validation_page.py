@@ -54,3 +54,27 @@ def test_the_diagnosis_section_tabulates_a_finished_run_without_its_record_names
     assert "rec_a" not in md and "rec_b" not in md
     assert "diagnosis" in page.OPT_IN
     assert page.main(["--diagnosis-results", str(tmp_path / "nothing"), "-o", str(out)]) == 2
+
+
+def test_the_benchmark_scores_join_the_diagnosis_section(tmp_path):
+    """A finished benchmark folder adds its targets table (measured, counts, Wilson interval, target) to the
+    diagnosis section; without the independent records' folder it is refused."""
+    rows = {"rec_a": score_case({"effects": {}}, {"verdict": "none", "accepted": [], "ambiguous_with": {},
+                                                   "ranked": [], "rules_fired": []})}
+    (tmp_path / "scores.json").write_text(json.dumps({"folder": "/x/records", "shrink_floor": 0.2,
+                                                      "scenarios": {"nominal_a": {"rows": rows,
+                                                                                  "summary": summary(rows)}}}))
+    bench = tmp_path / "bench"
+    bench.mkdir()
+    (bench / "scores.json").write_text(json.dumps({
+        "cases": 20, "seed": 11, "errors": 0, "false_alarm_rate": 0.5, "null_cases": 2, "top1": 0.7, "top2": 0.8,
+        "single_above": 10, "pairs_exact": 1 / 3, "pair_cases": 3, "median_shrink": 0.99,
+        "ci95": {"top1": [0.397, 0.892]}}))
+    out = tmp_path / "v.md"
+    assert page.main(["--only", "diagnosis", "--diagnosis-results", str(tmp_path), "--benchmark-results", str(bench),
+                      "-o", str(out)]) == 0
+    md = out.read_text()
+    assert "20 cases of seed 11, 0 errors" in md
+    assert "| top-1, single effects above the limit | 0.700 | 7 of 10 | 0.397-0.892 |" in md
+    assert "| false alarms (null cases) | 0.500 | 1 of 2 |" in md
+    assert page.main(["--only", "diagnosis", "--benchmark-results", str(bench), "-o", str(out)]) == 2

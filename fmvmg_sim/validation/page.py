@@ -10,8 +10,9 @@ some sections and writes them to another file (a partial page is never mistaken 
 ``--quick`` shortens every measurement to check the machinery (its figures are not the page's).
 
 The diagnosis section (minutes per record) is left out of a default run: ``--diagnosis-results DIR`` adds it,
-tabulating a finished ``fmvmg diagnose-independent`` output folder, and ``--only diagnosis`` diagnoses the labelled
-records that ship in ``tests/data/independent``.
+tabulating a finished ``fmvmg diagnose-independent`` output folder (``--benchmark-results DIR`` adds the scores of a
+finished ``fmvmg diagnose-benchmark`` folder to it), and ``--only diagnosis`` diagnoses the labelled records that
+ship in ``tests/data/independent``.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from ..record import atomic_write_text
 from ..scenario import load_scenario
 from . import compensation_records as R
 from . import independent as I
+from .scores_report import format_scores
 
 #: The source checkout this module sits in; its tests/data holds the outside reference data.
 REPO = Path(__file__).resolve().parents[2]
@@ -302,7 +304,30 @@ INDEPENDENT_RECORDS = REPO / "tests" / "data" / "independent"
 DIAGNOSIS_SCENARIOS = ("nominal_a", "nominal_a_stable_electronics")
 
 
-def diagnosis_records(quick: bool = False, log=print, results: str | None = None) -> Section:
+def benchmark_lines(folder: str) -> list[str]:
+    """The scores of a finished ``fmvmg diagnose-benchmark`` output folder (its ``scores.json``) against their targets.
+
+    Parameters
+    ----------
+    folder : str
+
+    Returns
+    -------
+    list of str
+        A sentence saying what was run, then the targets table of :func:`.scores_report.format_scores`.
+    """
+    sc = json.loads((Path(folder) / "scores.json").read_text())
+    table = format_scores(sc).split("\n")
+    start = next(i for i, ln in enumerate(table) if ln.startswith("| score |"))
+    end = next(i for i in range(start, len(table)) if not table[i].startswith("|"))
+    return ["On the project's own cases (`fmvmg diagnose-benchmark --cases N --seed S -o out/bench`, units drawn across "
+            "the nominal model's stated uncertainty, an effect mix withheld; `--benchmark-results out/bench` adds this "
+            f"table): {sc['cases']} cases of seed {sc.get('seed', '-')}, {sc.get('errors', 0)} errors; Wilson 95 % "
+            "intervals.", ""] + table[start:end]
+
+
+def diagnosis_records(quick: bool = False, log=print, results: str | None = None,
+                      benchmark: str | None = None) -> Section:
     """The diagnosis on labelled records of an independent generator, with each scenario of
     :data:`DIAGNOSIS_SCENARIOS` (:mod:`.independent`).
 
@@ -314,6 +339,8 @@ def diagnosis_records(quick: bool = False, log=print, results: str | None = None
     results : str, optional
         A finished ``fmvmg diagnose-independent`` output folder (its ``scores.json``) to tabulate instead of
         diagnosing the shipped records again.
+    benchmark : str, optional
+        A finished ``fmvmg diagnose-benchmark`` output folder whose scores are added (:func:`benchmark_lines`).
 
     Returns
     -------
@@ -340,6 +367,8 @@ def diagnosis_records(quick: bool = False, log=print, results: str | None = None
              "`--diagnosis-results` the section diagnoses the records that ship in `tests/data/independent`. "
              f"Records: {n_rec} (folder `{Path(res['folder']).name}`).", ""]
     lines += I.format_table(res, numbered=True).rstrip("\n").split("\n")
+    if benchmark is not None:
+        lines += [""] + benchmark_lines(benchmark)
     data = {n: res["scenarios"][n]["summary"] for n in names}
     return Section("Diagnosis on records made elsewhere", lines, data)
 
@@ -414,14 +443,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--diagnosis-results", default=None, metavar="DIR",
                     help="add the diagnosis section (left out by default: minutes per record), tabulating a finished "
                          "`fmvmg diagnose-independent` output folder")
+    ap.add_argument("--benchmark-results", default=None, metavar="DIR",
+                    help="with --diagnosis-results: add the scores of a finished `fmvmg diagnose-benchmark` output "
+                         "folder to the diagnosis section")
     a = ap.parse_args(argv)
     keys = None
     options = {}
-    if a.diagnosis_results:
-        if not (Path(a.diagnosis_results) / "scores.json").is_file():
-            print(f"--diagnosis-results: no scores.json in {a.diagnosis_results}", file=sys.stderr)
+    for opt, folder in (("--diagnosis-results", a.diagnosis_results), ("--benchmark-results", a.benchmark_results)):
+        if folder and not (Path(folder) / "scores.json").is_file():
+            print(f"{opt}: no scores.json in {folder}", file=sys.stderr)
             return 2
-        options["diagnosis"] = {"results": a.diagnosis_results}
+    if a.benchmark_results and not a.diagnosis_results:
+        print("--benchmark-results: needs --diagnosis-results (the section it is added to)", file=sys.stderr)
+        return 2
+    if a.diagnosis_results:
+        options["diagnosis"] = {"results": a.diagnosis_results, "benchmark": a.benchmark_results}
     if a.only:
         keys = [k.strip() for k in a.only.split(",")]
         bad = [k for k in keys if k not in dict(SECTIONS)]
