@@ -78,3 +78,11 @@ def test_the_benchmark_scores_join_the_diagnosis_section(tmp_path):
     assert "| top-1, single effects above the limit | 0.700 | 7 of 10 | 0.397-0.892 |" in md
     assert "| false alarms (null cases) | 0.500 | 1 of 2 |" in md
     assert page.main(["--only", "diagnosis", "--benchmark-results", str(bench), "-o", str(out)]) == 2
+
+
+@pytest.mark.parametrize("text", ["{not json", "[1, 2]", '{"rows": []}'])
+def test_a_malformed_results_folder_is_refused_naming_its_file(tmp_path, capsys, text):
+    (tmp_path / "scores.json").write_text(text)
+    assert page.main(["--only", "diagnosis", "--diagnosis-results", str(tmp_path), "-o", str(tmp_path / "v.md")]) == 2
+    assert str(tmp_path / "scores.json") in capsys.readouterr().err
+    assert not (tmp_path / "v.md").exists()

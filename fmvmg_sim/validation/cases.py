@@ -564,9 +564,13 @@ def at_bound(params: dict, name: str, scale: float) -> bool:
     -------
     bool
     """
-    return any(p not in NOT_SCALED and abs(v * scale) > 0.0
-               and not inside(MODELS[name][p])[0] < v * scale < inside(MODELS[name][p])[1]
-               for p, v in params.items())
+    for p, v in params.items():
+        if p in NOT_SCALED or v * scale == 0.0:
+            continue
+        lo, hi = inside(MODELS[name][p])
+        if not lo < v * scale < hi:
+            return True
+    return False
 
 
 def scaled(effects: dict, scale: float) -> dict:

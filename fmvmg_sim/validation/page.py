@@ -38,7 +38,7 @@ from ..record import atomic_write_text
 from ..scenario import load_scenario
 from . import compensation_records as R
 from . import independent as I
-from .scores_report import format_scores
+from .scores_report import targets_table
 
 #: The source checkout this module sits in; its tests/data holds the outside reference data.
 REPO = Path(__file__).resolve().parents[2]
@@ -314,16 +314,13 @@ def benchmark_lines(folder: str) -> list[str]:
     Returns
     -------
     list of str
-        A sentence saying what was run, then the targets table of :func:`.scores_report.format_scores`.
+        A sentence saying what was run, then :func:`.scores_report.targets_table`.
     """
     sc = json.loads((Path(folder) / "scores.json").read_text())
-    table = format_scores(sc).split("\n")
-    start = next(i for i, ln in enumerate(table) if ln.startswith("| score |"))
-    end = next(i for i in range(start, len(table)) if not table[i].startswith("|"))
     return ["On the project's own cases (`fmvmg diagnose-benchmark --cases N --seed S -o out/bench`, units drawn across "
             "the nominal model's stated uncertainty, an effect mix withheld; `--benchmark-results out/bench` adds this "
             f"table): {sc['cases']} cases of seed {sc.get('seed', '-')}, {sc.get('errors', 0)} errors; Wilson 95 % "
-            "intervals.", ""] + table[start:end]
+            "intervals.", ""] + targets_table(sc)
 
 
 def diagnosis_records(quick: bool = False, log=print, results: str | None = None,
@@ -449,9 +446,22 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     keys = None
     options = {}
-    for opt, folder in (("--diagnosis-results", a.diagnosis_results), ("--benchmark-results", a.benchmark_results)):
-        if folder and not (Path(folder) / "scores.json").is_file():
+    for opt, folder, key, cmd in (("--diagnosis-results", a.diagnosis_results, "scenarios", "diagnose-independent"),
+                                  ("--benchmark-results", a.benchmark_results, "cases", "diagnose-benchmark")):
+        if not folder:
+            continue
+        f = Path(folder) / "scores.json"
+        if not f.is_file():
             print(f"{opt}: no scores.json in {folder}", file=sys.stderr)
+            return 2
+        try:
+            sc = json.loads(f.read_text())
+            ok = isinstance(sc, dict) and key in sc
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            print(f"{opt}: {f} is not a scores JSON object ({e})", file=sys.stderr)
+            return 2
+        if not ok:
+            print(f"{opt}: {f} has no '{key}' key (not the scores of a finished `fmvmg {cmd}`)", file=sys.stderr)
             return 2
     if a.benchmark_results and not a.diagnosis_results:
         print("--benchmark-results: needs --diagnosis-results (the section it is added to)", file=sys.stderr)

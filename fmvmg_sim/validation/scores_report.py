@@ -44,6 +44,29 @@ def _met(v, ci, op: str, target: float) -> str:
     return out
 
 
+def targets_table(sc: dict) -> list[str]:
+    """The scores against their :data:`TARGETS`: measured, counts, Wilson 95 % interval, target, whether met.
+
+    Parameters
+    ----------
+    sc : dict
+        From :func:`~.scoring.score`.
+
+    Returns
+    -------
+    list of str
+        Markdown table lines.
+    """
+    cis = sc.get("ci95") or {}
+    L = ["| score | measured | cases | 95 % interval | target | met |", "|---|---|---|---|---|---|"]
+    for key, nkey, op, target, label in TARGETS:
+        v = sc.get(key)
+        n = sc.get(nkey) if nkey else None
+        L.append(f"| {label} | {_pct(v)} | {_count(v, n) if nkey else '-'} | {_interval(cis.get(key))} | "
+                 f"{op} {target:g} | {_met(v, cis.get(key), op, target)} |")
+    return L
+
+
 def format_scores(sc: dict) -> str:
     """Markdown summary of benchmark scores.
 
@@ -64,13 +87,7 @@ def format_scores(sc: dict) -> str:
     L = [head, ""]
     if sc.get("errors"):
         L += [f"**{sc['errors']} diagnoses failed** (scored as misses; their rows hold the error).", ""]
-    cis = sc.get("ci95") or {}
-    L += ["| score | measured | cases | 95 % interval | target | met |", "|---|---|---|---|---|---|"]
-    for key, nkey, op, target, label in TARGETS:
-        v = sc.get(key)
-        n = sc.get(nkey) if nkey else None
-        L.append(f"| {label} | {_pct(v)} | {_count(v, n) if nkey else '-'} | {_interval(cis.get(key))} | "
-                 f"{op} {target:g} | {_met(v, cis.get(key), op, target)} |")
+    L += targets_table(sc)
     L += ["", "Intervals: Wilson score, 95 %, on the counted cases; \"decided\" when the whole interval lies on one "
           "side of the target."]
     ceil = sc.get("ceiling") or {}
