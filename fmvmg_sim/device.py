@@ -258,11 +258,9 @@ class Device:
         if k_s <= 0:
             raise ValueError("electrostatic softening exceeds the sense stiffness")
         f_s = np.sqrt(k_s / me["m_sense_kg"]) / (2 * np.pi)
-        # the extra drift (the q_factor_drift effect) and the curvature act on ln Q: Q stays positive at any
-        # temperature whatever their size (a factor 1 + tc dT would cross zero within the effect's range)
-        q = {m: float(law.quality_factor(me[f"q_{m}"], temperature_C, T0, th["q_ted"], th["q_anchor"],
-                                         th["q_gas_exponent"]))
-             * float(np.exp(th.get("q_extra_tc_per_K", 0.0) * dT + th.get("q_curvature_per_K2", 0.0) * dT * dT))
+        q = {m: float(law.quality_factor_law(me[f"q_{m}"], temperature_C, T0, th["q_ted"], th["q_anchor"],
+                                             th["q_gas_exponent"], th.get("q_extra_tc_per_K", 0.0),
+                                             th.get("q_curvature_per_K2", 0.0)))
              for m in ("drive", "sense")}
         omega_q = np.deg2rad(me["quadrature_rate_dps"]) * (1 + th["quadrature_tc_per_K"] * dT)
         k_q = 2 * me["m_coriolis_kg"] * 2 * np.pi * f_d * omega_q

@@ -58,6 +58,30 @@ def quality_factor(q0, T_C, T0_C, q_ted, q_anchor, gas_exponent):
     return 1.0 / (inv_gas + 1.0 / q_ted + 1.0 / q_anchor)
 
 
+def quality_factor_law(q0, T_C, T0_C, q_ted, q_anchor, gas_exponent, extra_tc_per_K=0.0, curvature_per_K2=0.0):
+    """:func:`quality_factor` with an extra drift and a curvature on ``ln Q``: ``exp(tc dT + c dT^2)`` times it.
+
+    Acting on ``ln Q`` keeps Q positive at any temperature whatever their size (a factor ``1 + tc dT`` would cross
+    zero within the extra drift's range).
+
+    Parameters
+    ----------
+    q0, T_C, T0_C, q_ted, q_anchor, gas_exponent
+        As :func:`quality_factor`.
+    extra_tc_per_K : float, optional
+        The extra drift of ``ln Q`` (the ``q_factor_drift`` effect).
+    curvature_per_K2 : float, optional
+        The curvature of ``ln Q``.
+
+    Returns
+    -------
+    float or ndarray
+    """
+    dT = np.asarray(T_C) - T0_C
+    return quality_factor(q0, T_C, T0_C, q_ted, q_anchor, gas_exponent) * np.exp(
+        extra_tc_per_K * dT + curvature_per_K2 * dT * dT)
+
+
 def linear_tc(value0, dT_K, tc_per_K):
     """``value0 (1 + tc dT)``: a first-order temperature coefficient.
 

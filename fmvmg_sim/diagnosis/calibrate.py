@@ -111,6 +111,22 @@ class Calibration:
                 "iterations": self.iterations}
 
 
+def resolution(objective: float) -> float:
+    """The smallest fall of the calibration's objective that says something of the record: :data:`MIN_GAIN_CHI2`,
+    or :data:`MIN_GAIN_REL` of the objective where a misfit the model lacks (slow noise, an unmodelled effect)
+    dominates it.
+
+    Parameters
+    ----------
+    objective : float
+
+    Returns
+    -------
+    float
+    """
+    return max(MIN_GAIN_CHI2, MIN_GAIN_REL * objective)
+
+
 def _objective(fitter: Fitter, rows: np.ndarray, theta: dict, base, path: dict) -> float:
     """The calibration's objective with the exact model: weighted squares of the training blocks plus the priors."""
     pred = fitter.through_channels(theta, base.evaluate(path["die_b"], path["rate_b"], path["quad_b"]))
@@ -219,7 +235,7 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
         gained = obj - t_obj
         theta, base, path, obj = trial, t_base, t_path, t_obj
         damping = max(damping / 2.0, 1e-6)
-        if np.max(np.abs(step)) < tol or gained < max(MIN_GAIN_CHI2, MIN_GAIN_REL * obj):
+        if np.max(np.abs(step)) < tol or gained < resolution(obj):
             break
         if np.max(np.abs(step[dev]), initial=0.0) > refresh:
             fitter._nom_jac = None  # the sensitivities again, where the unit now is

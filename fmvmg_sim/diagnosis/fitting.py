@@ -242,6 +242,11 @@ class Fitter:
     def _channel_names(self) -> set:
         return {k.name for k, _ in self._chan}
 
+    @property
+    def case_dT_K(self) -> np.ndarray:
+        """Each block's case temperature from the device's reference (K): what the channels' gain drifts read."""
+        return self._dT_b
+
     def channel_gains(self, theta: dict) -> np.ndarray:
         """``(1 + gain)(1 + tc (T - T0))`` of each channel on each block at ``theta`` (1 where no gain knob acts),
         the quadrature output's times its polarity.

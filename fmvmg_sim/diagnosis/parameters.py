@@ -122,9 +122,26 @@ def apply_nominal(device: Device, values: dict) -> Device:
                 for key in path[:-1]:
                     d = d[key]
                 v0 = d.get(path[-1], 0.0)  # an optional law (a curvature) is 0 when the device file leaves it out
-                d[path[-1]] = (v0 * (1.0 + x) if k.kind == "rel" else v0 / (1.0 + x) if k.kind == "inv_rel"
-                               else v0 + x)
+                d[path[-1]] = deviated(k.kind, v0, x)
     return Device(v, device.path)
+
+
+def deviated(kind: str, v0, x):
+    """A value ``v0`` at a knob's deviation ``x``: ``v0 (1 + x)`` for a relative knob, ``v0 / (1 + x)`` for one on
+    the inverse (a Q through its damping), ``v0 + x`` otherwise.
+
+    Parameters
+    ----------
+    kind : str
+        The knob's kind (:class:`fmvmg_sim.uncertainty.Knob`).
+    v0 : float or ndarray
+    x : float or ndarray
+
+    Returns
+    -------
+    float or ndarray
+    """
+    return v0 * (1.0 + x) if kind == "rel" else v0 / (1.0 + x) if kind == "inv_rel" else v0 + x
 
 
 def knob_values(device: Device, name: str, x: float) -> tuple[float, float]:
@@ -154,7 +171,7 @@ def knob_values(device: Device, name: str, x: float) -> tuple[float, float]:
     for key in k.paths[0][:-1]:
         d = d[key]
     v = float(d.get(k.paths[0][-1], 0.0))
-    return v, (v * (1.0 + x) if k.kind == "rel" else v / (1.0 + x) if k.kind == "inv_rel" else v + x)
+    return v, deviated(k.kind, v, x)
 
 
 def flip_quadrature(device: Device) -> Device:

@@ -27,8 +27,9 @@ from ..record import Record, read_record
 from ..scenario import load_scenario
 from . import localize as loc
 from .attribution import CandidateFitter, attribute
-from .calibrate import calibrate, law_starts
+from .calibrate import calibrate, law_starts, resolution
 from .data import Prepared, prepare
+from .effort_law import effort_law_start
 from .detection import detection_limits
 from .fitting import Fitter
 from .forward import CHANNELS, IQUAD, IRATE
@@ -157,7 +158,10 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
     (:func:`quadrature_conventions`) turn the demodulated outputs the opposite ways with the phase error, so that
     the bias the quadrature leaks has the one sign or the other. Each is calibrated, and the one that fits the
     training window better is kept. The one kept is calibrated again from the Q law's other form
-    (:func:`.calibrate.law_starts`), and the better of the two kept.
+    (:func:`.calibrate.law_starts`), then from the Q law and effort channel that fit the AGC effort alone
+    (:func:`.effort_law.effort_law_start`); a calibration from another start replaces it when it fits the training
+    window better by more than the calibration's resolution (:func:`.calibrate.resolution`: where an unmodelled
+    effect dominates the misfit, a start's small gain is the effect's trade with the laws, not the unit).
 
     Parameters
     ----------
@@ -177,10 +181,12 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
         cal = calibrate(f, train)
         if best is None or cal.objective < best[1].objective:
             best = (f, cal)
-    for start in law_starts(best[0].knobs, best[0].device0):
+    for start in law_starts(best[0].knobs, best[0].device0) + [effort_law_start(*best, train)]:
+        if start is None:
+            continue
         f = Fitter(prep, best[0].device0, quadrature_polarity=best[0].quadrature_polarity)
         cal = calibrate(f, train, start=start)
-        if cal.objective < best[1].objective:
+        if cal.objective < best[1].objective - resolution(best[1].objective):
             best = (f, cal)
     f, cal = best
     f.delay_s = cal.theta.get("temperature_delay_s", 0.0)
