@@ -45,6 +45,9 @@ def test_tiny_benchmark(tmp_path, capsys):
     sc2 = json.loads(capsys.readouterr().out)
     assert not (again / "cases").exists() and not (again / "labels").exists()
     assert sc2["cases"] == 2 and sc2["cases_from"] == str(out)
+    made = json.loads((out / "scores.json").read_text())
+    assert {k: sc2[k] for k in ("seed", "case_duration_s", "case_rate_Hz", "mix")} == {
+        k: made[k] for k in ("seed", "case_duration_s", "case_rate_Hz", "mix")}  # what made the cases, carried
     assert all(v["gained"] == v["lost"] == [] and v["right_before"] == v["right_after"] for v in sc2["paired"].values())
     assert sum(v["cases"] for v in sc2["paired"].values()) >= 1
     first = {r["case"]: r for r in json.loads((out / "scores.json").read_text())["rows"]}

@@ -115,7 +115,10 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
         sc.update(cases_from=str(cases_from), null_runs=n_null)
         before = cases_from / "scores.json"
         if before.is_file():
-            sc["paired"] = paired_changes(json.loads(before.read_text())["rows"], sc["rows"])
+            earlier = json.loads(before.read_text())
+            sc["paired"] = paired_changes(earlier["rows"], sc["rows"])
+            # what made the cases (their seed, length, rate and mix) is the earlier run's
+            sc.update({k: earlier[k] for k in ("seed", "case_duration_s", "case_rate_Hz", "mix") if k in earlier})
     md = format_scores(sc)
     if "paired" in sc:
         md += "\n" + format_paired(sc["paired"], str(cases_from))
