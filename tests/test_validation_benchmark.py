@@ -386,3 +386,15 @@ def test_help_states_the_case_mix_in_plain_percent(capsys):
         main(["diagnose-benchmark", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert ex.value.code == 0 and "~20 % null, ~55 % one effect, ~25 % two effects" in out and "%%" not in out
+
+
+def test_benchmark_scores_the_diagnosis_as_users_run_it():
+    """The benchmark's default null re-simulations are the diagnosis' own (fewer raise its false alarms)."""
+    import inspect
+
+    from fmvmg_sim.cli.main import build_parser
+    from fmvmg_sim.diagnosis.null import N_NULL
+    from fmvmg_sim.validation.benchmark import run_benchmark
+
+    assert inspect.signature(run_benchmark).parameters["n_null"].default == N_NULL
+    assert build_parser().parse_args(["diagnose-benchmark"]).null_runs in (None, N_NULL)

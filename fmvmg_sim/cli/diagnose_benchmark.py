@@ -22,7 +22,8 @@ def register(sub) -> None:
     add_output(p, "out/diagnose_benchmark")
     p.add_argument("--duration-h", type=float, default=3.0, help="case record length in hours (default 3)")
     p.add_argument("--rate-hz", type=float, default=1.0, help="case output rate (default 1 Hz)")
-    p.add_argument("--null-runs", type=int, default=4, help="null re-simulations per diagnosis (default 4)")
+    p.add_argument("--null-runs", type=int, default=None,
+                   help="null re-simulations per diagnosis (default 6, as fmvmg diagnose)")
     p.add_argument("--workers", type=int, default=2, help="LocalCluster workers (default 2)")
     p.add_argument("--effects", default=None, metavar="NAME[,NAME...]",
                    help="draw effects only from these (default: the whole library)")
@@ -49,8 +50,11 @@ def main(args) -> int:
     from ..errors import InputError
     from ..output import OutputFolder
     from ..paths import resolve_scenario
+    from ..diagnosis.null import N_NULL
     if args.cases < 1:
         raise InputError("must be >= 1", "--cases")
+    if args.null_runs is not None and args.null_runs < 2:
+        raise InputError("needs at least 2 null re-simulations", "--null-runs")
     if args.duration_h * 3600 < 3600:
         raise InputError("cases must be at least 1 h long (training plus held-out windows)", "--duration-h")
     scn = str(resolve_scenario(args.scenario or "nominal_a"))
@@ -76,7 +80,7 @@ def main(args) -> int:
     # written in place (the labels name their cases' paths), the previous run put back if this one fails
     staged = OutputFolder(args.out, command="diagnose-benchmark", in_place=True)
     sc = run_benchmark(args.cases, args.seed, Path(args.out), scn, args.scheduler, args.duration_h * 3600.0,
-                       args.rate_hz, args.null_runs, args.workers, progress=True, mix=mix, cases_from=cases_from)
+                       args.rate_hz, args.null_runs or N_NULL, args.workers, progress=True, mix=mix, cases_from=cases_from)
     staged.commit()
     slim = {k: v for k, v in sc.items() if k != "rows"}
     if args.json:

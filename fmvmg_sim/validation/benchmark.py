@@ -11,7 +11,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from ..diagnosis.pipeline import diagnose
+from ..diagnosis.pipeline import N_NULL, diagnose
 from ..diagnosis.report import write_report
 from ..record import atomic_write_text
 from .cases import CaseMix, make_case
@@ -42,7 +42,7 @@ def _make(k, seed, out, scenario, duration_s, rate_Hz, mix=None):
 
 
 def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: str | None = None,
-                  duration_s: float = 3 * 3600.0, rate_Hz: float = 1.0, n_null: int = 4,
+                  duration_s: float = 3 * 3600.0, rate_Hz: float = 1.0, n_null: int = N_NULL,
                   n_workers: int = 2, progress: bool = True, mix=None, cases_from: Path | None = None) -> dict:
     """Generate, diagnose (on Dask) and score ``n_cases`` cases.
 
@@ -57,7 +57,9 @@ def run_benchmark(n_cases: int, seed: int, out: Path, scenario: str, scheduler: 
     duration_s, rate_Hz : float, optional
         Case records.
     n_null : int, optional
-        Null re-simulations per diagnosis.
+        Null re-simulations per diagnosis: by default the diagnosis' own (:data:`~fmvmg_sim.diagnosis.null.N_NULL`),
+        so that the scores are those of the diagnosis a user runs. Fewer replicates estimate the null's spread
+        more poorly and raise the false alarms.
     n_workers : int, optional
     progress : bool, optional
     mix : CaseMix, optional
