@@ -98,6 +98,33 @@ def posterior_draws(cal: Calibration, n: int, seed: int) -> list[dict]:
             for _ in range(n)]
 
 
+def law_errors(fitter: Fitter, train: np.ndarray, n: int, seed: int) -> list[np.ndarray]:
+    """Each replicate's error of the model's laws beyond the training temperatures, drawn at their stated accuracy.
+
+    The record's residual beyond the temperatures the calibration saw holds the nominal laws' own error there (a law
+    of another form, fitted over the window, extrapolates off by up to :data:`fmvmg_sim.uncertainty.LAW_CURVATURE`
+    times the squared distance of the channel's value); the replicates, simulated with the model's laws, hold none.
+    The localisation reads both against the same accuracy (:meth:`.fitting.Fitter.law_sd`), so the replicates carry
+    an error of that size: on each channel the law-accuracy curve with a normal amplitude, one per replicate. Zero
+    inside the training temperatures and for a device that states no law accuracy.
+
+    Parameters
+    ----------
+    fitter : Fitter
+        After :meth:`~.fitting.Fitter.set_law_accuracy`.
+    train : ndarray of bool
+        The calibration's training blocks.
+    n, seed : int
+
+    Returns
+    -------
+    list of ndarray, shape (n_blocks, C)
+    """
+    sd = np.nan_to_num(fitter.law_sd(train))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6C6177]))
+    return [sd * rng.standard_normal(sd.shape[1]) for _ in range(n)]
+
+
 def converter_model(prep: Prepared, raw_nulls: list, null_preds: list) -> dict:
     """The coarse converter of each channel whose staircase shows, from the record's lattice and the null.
 
@@ -228,12 +255,14 @@ def simulate_null(scn, fitter: Fitter, cal: Calibration, n: int, seed: int, prog
     ho_b, S_ho = heldout_blocks(prep), heldout_sigma(fitter)
     slow = loc.slow_templates(prep)
     win = window_masks(prep, train)
+    laws = law_errors(fitter, train, len(records), seed)
     stats, windows, Z_noise, ms, a_ho, a_tr = [], [], [], [], [], []
-    for nr, pred_k, Yn in zip(records, preds, blocks):
+    for nr, pred_k, Yn, law in zip(records, preds, blocks, laws):
         # against the replicate's own calibration on the same training blocks, as the record's residual is against
         # its own: on the training window a calibration absorbs part of the noise, and beyond it the estimate's error
-        pred_n = cal.lin.predict(fitter.solve(cal.lin, train, Y=Yn).x)
-        Z_n = fitter.residual(pred_n, Y=Yn)
+        # and the laws' own error beyond the training temperatures
+        pred_n = cal.lin.predict(fitter.solve(cal.lin, train, Y=Yn + law).x)
+        Z_n = fitter.residual(pred_n, Y=Yn + law)
         stats.append(loc.residual_stats(prep, Z_n, rate_residual(prep, pred_n, nr["rate_V"])))
         windows.append(window_stats(prep, Z_n, win))
         # the noise alone (against the replicate's own device): the scoring noise model, the held-out noise level
