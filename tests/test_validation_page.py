@@ -67,14 +67,14 @@ def test_the_benchmark_scores_join_the_diagnosis_section(tmp_path):
     bench = tmp_path / "bench"
     bench.mkdir()
     (bench / "scores.json").write_text(json.dumps({
-        "cases": 20, "seed": 11, "errors": 0, "false_alarm_rate": 0.5, "null_cases": 2, "top1": 0.7, "top2": 0.8,
+        "cases": 20, "seed": 11, "null_runs": 6, "errors": 0, "false_alarm_rate": 0.5, "null_cases": 2, "top1": 0.7, "top2": 0.8,
         "single_above": 10, "pairs_exact": 1 / 3, "pair_cases": 3, "median_shrink": 0.99,
         "ci95": {"top1": [0.397, 0.892]}}))
     out = tmp_path / "v.md"
     assert page.main(["--only", "diagnosis", "--diagnosis-results", str(tmp_path), "--benchmark-results", str(bench),
                       "-o", str(out)]) == 0
     md = out.read_text()
-    assert "20 cases of seed 11, 0 errors" in md
+    assert "20 cases of seed 11, 6 null re-simulations per diagnosis, 0 errors" in md
     assert "| top-1, single effects above the limit | 0.700 | 7 of 10 | 0.397-0.892 |" in md
     assert "| false alarms (null cases) | 0.500 | 1 of 2 |" in md
     assert page.main(["--only", "diagnosis", "--benchmark-results", str(bench), "-o", str(out)]) == 2
