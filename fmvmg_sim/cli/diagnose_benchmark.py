@@ -80,7 +80,8 @@ def main(args) -> int:
     # written in place (the labels name their cases' paths), the previous run put back if this one fails
     staged = OutputFolder(args.out, command="diagnose-benchmark", in_place=True)
     sc = run_benchmark(args.cases, args.seed, Path(args.out), scn, args.scheduler, args.duration_h * 3600.0,
-                       args.rate_hz, args.null_runs or N_NULL, args.workers, progress=True, mix=mix, cases_from=cases_from)
+                       args.rate_hz, args.null_runs or N_NULL, args.workers, progress=True, mix=mix,
+                       cases_from=cases_from)
     staged.commit()
     slim = {k: v for k, v in sc.items() if k != "rows"}
     if args.json:

@@ -320,7 +320,8 @@ def benchmark_lines(folder: str) -> list[str]:
     return ["On the project's own cases (`fmvmg diagnose-benchmark --cases N --seed S -o out/bench`, units drawn across "
             "the nominal model's stated uncertainty, an effect mix withheld; `--benchmark-results out/bench` adds this "
             f"table): {sc['cases']} cases of seed {sc.get('seed', '-')}, {sc.get('null_runs', '-')} null "
-            f"re-simulations per diagnosis, {sc.get('errors', 0)} errors; Wilson 95 % intervals.", ""] + targets_table(sc)
+            f"re-simulations per diagnosis, {sc.get('errors', 0)} errors; Wilson 95 % intervals.", ""] \
+        + targets_table(sc)
 
 
 def diagnosis_records(quick: bool = False, log=print, results: str | None = None,
