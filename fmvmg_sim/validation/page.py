@@ -317,10 +317,11 @@ def benchmark_lines(folder: str) -> list[str]:
         A sentence saying what was run, then :func:`.scores_report.targets_table`.
     """
     sc = json.loads((Path(folder) / "scores.json").read_text())
+    errors = int(sc.get("errors", 0))
     return ["On the project's own cases (`fmvmg diagnose-benchmark --cases N --seed S -o out/bench`, units drawn across "
             "the nominal model's stated uncertainty, an effect mix withheld; `--benchmark-results out/bench` adds this "
             f"table): {sc['cases']} cases of seed {sc.get('seed', '-')}, {sc.get('null_runs', '-')} null "
-            f"re-simulations per diagnosis, {sc.get('errors', 0)} errors; Wilson 95 % intervals.", ""] \
+            f"re-simulations per diagnosis, {errors} error{'' if errors == 1 else 's'}; Wilson 95 % intervals.", ""] \
         + targets_table(sc)
 
 
