@@ -3,7 +3,8 @@
 A few replicates of the calibrated unit (its knobs drawn from the calibration's posterior) are simulated with
 the envelope engine on the record's temperature and applied rate (:func:`.localize.null_records`), read through
 the record's converter and the calibrated channel knobs, and given the auxiliary-channel noise the record
-carries beyond the simulated loop's (:mod:`.noise_match`). Every statistic of the diagnosis is read on them as on
+carries beyond the simulated loop's (:mod:`.noise_match`); beyond the training temperatures their localisation
+statistics also hold the laws' error at its stated accuracy (:func:`law_errors`). Every statistic of the diagnosis is read on them as on
 the record: the localisation's null band, the scoring noise model, the held-out noise level, the flicker band,
 the record-design note.
 """
