@@ -1,9 +1,14 @@
-"""Calibration starts (fmvmg_sim.diagnosis.calibrate.law_starts): the Q law's other form within the knobs' bounds."""
+"""Calibration (fmvmg_sim.diagnosis.calibrate): the Q law's other start within the knobs' bounds, and what releasing
+a bound gains."""
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from fmvmg_sim.diagnosis.calibrate import FREE_MOLECULAR_EXPONENT, law_starts
+from fmvmg_sim.diagnosis.calibrate import (FREE_MOLECULAR_EXPONENT, Calibration, law_starts, release_gains,
+                                           resolution)
+from fmvmg_sim.diagnosis.fitting import Fitter, Lin
 from fmvmg_sim.diagnosis.parameters import KnobSet, apply_nominal
 from fmvmg_sim.scenario import load_scenario
 from tests.test_diagnosis_helpers import NOMINAL
@@ -49,3 +54,44 @@ def test_the_start_stays_within_the_bounds_and_needs_the_solid_damping_knob():
     assert start["q_solid_damping_rel"] == ks.lo[ks.names.index("q_solid_damping_rel")]
     plain = dev.with_overrides({"tolerance": {"q_solid_damping_rel": 0.0}}, "test")
     assert law_starts(KnobSet.of(plain), plain) == []
+
+
+def _lin_problem(cols: np.ndarray, y: np.ndarray, x0: np.ndarray, tol: float = 1.0):
+    """A linear calibration problem on one channel: a fitter-like object (unit block sigma) and its Lin at ``x0``."""
+    n, k = cols.shape
+    fit = SimpleNamespace(S=np.ones((n, 1)), Y=y[:, None], present=np.ones(1, bool),
+                          knobs=SimpleNamespace(tolerance=np.full(k, tol)))
+    fit.solve = Fitter.solve.__get__(fit)
+    lin = Lin(y0=(cols @ x0)[:, None], cols=cols[:, None, :], names=[f"k{i}" for i in range(k)], x0=x0.astype(float),
+              prior_sd=np.full(k, tol), lo=np.full(k, -1.5 * tol), hi=np.full(k, 1.5 * tol))
+    return fit, lin
+
+
+def test_release_gain_tells_a_bound_the_record_asks_for_from_a_flat_valley():
+    """A knob the data push to 3 tolerances gains ~ n (1.5 tol)^2 var(col) when released; two collinear knobs whose
+    sum the data fix, one of them left at its bound, gain nothing: the objective is flat along the valley but for
+    the prior, whose optimum lies inside the bounds (far below the calibration's resolution on a record whose misfit
+    is 4000): that bound is a flat valley's, not asked for by the record."""
+    rng = np.random.default_rng(3)
+    n = 4000
+    noise = rng.normal(size=n)
+    a, b = rng.normal(size=n), rng.normal(size=n)
+    fit, lin = _lin_problem(np.c_[a, b], 3.0 * a + noise, np.array([1.5, 0.0]))
+    gain = release_gains(fit, lin, np.ones(n, bool), ["k0"])["k0"]
+    assert gain == pytest.approx(np.sum((1.5 * a) ** 2) - (3.0 ** 2 - 1.5 ** 2), rel=0.05)
+    fit, lin = _lin_problem(np.c_[a, a], 2.0 * a + noise, np.array([1.5, 0.5]))
+    rows = np.ones(n, bool)
+    gain = release_gains(fit, lin, rows, ["k0"])["k0"]
+    sol = fit.solve(lin, rows)
+    objective = sol.cost + float(sol.x @ sol.x)
+    assert objective == pytest.approx(n, rel=0.1)
+    # the linearised optimum splits the sum evenly (the prior's (1, 1)), inside the bound: the calibration stopped on
+    # the flat valley short of it, and releasing the bound gains nothing
+    assert np.allclose(sol.x, [1.0, 1.0], atol=0.01)
+    assert gain == pytest.approx(0.0, abs=1e-6) and gain < resolution(objective)
+    cal = Calibration(theta={"k0": 1.5, "k1": 0.5}, sd={}, identifiable={}, correlated=[], lin=lin, base=None,
+                      iterations=1, solution=sol, tolerance={"k0": 1.0, "k1": 1.0}, objective=objective,
+                      release_gain={"k0": gain})
+    assert cal.at_bound == ["k0"] and cal.asked_at_bound == []
+    cal.release_gain = {"k0": 10 * resolution(objective)}
+    assert cal.asked_at_bound == ["k0"]

@@ -5,13 +5,19 @@ record channels, internal channels and metadata of a short run of each shipped s
 scenario with every time-history effect and a fast temperature ramp) in each engine. When the physics or
 the numerics change on purpose, regenerate it with ``python -m tests.test_records_unchanged`` and say in
 the commit message what changed. The digests hold for the compiled roll-outs on one platform (numpy,
-scipy, CasADi and gcc versions, CPU); runs in CasADi's virtual machine draw their noise differently and
-are skipped.
+scipy, CasADi and C compiler versions, CPU: the roll-outs are built for the CPU they run on, and numpy
+dispatches its transcendental functions by the CPU's vector extensions), named by :data:`PLATFORM`; on
+another platform the test is skipped naming both, and regenerating the table there makes it that
+platform's guard. Runs in CasADi's virtual machine draw their noise differently and are skipped.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
+import platform
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -19,6 +25,7 @@ import numpy as np
 import pytest
 
 from fmvmg_sim.carrier.engine import run_carrier
+from fmvmg_sim.compiled import _cpu_id
 from fmvmg_sim.envelope.engine import run_envelope
 from fmvmg_sim.paths import shipped_scenarios
 from fmvmg_sim.scenario import load_scenario
@@ -56,37 +63,54 @@ quantization = { lsb_V = 1e-3 }
 EFFECTS_TEMPERATURE = ("start_C = 20.0\nsegments = [ { hold_s = 0.01 }, { ramp_to_C = 40.0, rate_C_per_min = 60.0 },"
                        " { ramp_to_C = 30.0, rate_C_per_min = 60.0 } ]")
 
+def platform_key() -> str:
+    """What the digests depend on besides the code: machine, CPU (model and flags, hashed), C compiler, numpy,
+    scipy and CasADi versions."""
+    import casadi
+    import scipy
+    cc = shutil.which(os.environ.get("CC") or "gcc")
+    cc_version = ""
+    if cc:
+        out = subprocess.run([cc, "-dumpfullversion"], capture_output=True, text=True)
+        cc_version = out.stdout.strip() or out.stderr.strip()[:40]
+    cpu = hashlib.sha256(_cpu_id().encode()).hexdigest()[:12]
+    return (f"{platform.machine()} cpu {cpu} cc {cc_version} numpy {np.__version__} scipy {scipy.__version__} "
+            f"casadi {casadi.__version__}")
+
+
+#: The platform the table below was made on (:func:`platform_key`).
+PLATFORM = "x86_64 cpu f84b97a458c3 cc 12.2.0 numpy 2.4.6 scipy 1.17.1 casadi 3.8.2"
 SHA256 = {
-    ("force_rebalance_rate", "carrier"): "403417b9093b8b4f469c86be9ec16b4477a39c1bc7feb9128b2820b69e60531f",
-    ("force_rebalance_rate", "envelope"): "df215b7f38c9c7809c398df2e014b9c6b57d94e063831d3bf1d7f4317bc6c0d5",
-    ("nominal_a", "carrier"): "f7e8ed1d1d959812e4dcec044e3303b9ca7f82c066af88a80b7c64d38f1864d3",
-    ("nominal_a", "envelope"): "068754c5212b04c15be0bd2e3aaf9fe5bffe5a6dbd1b55c1316053257f2cf669",
-    ("nominal_a_stable_electronics", "carrier"): "eb49e50ec9e43bcf62f2a25b8b18ac07edcb59cfac81088b4b8b7d2eaf2bccb3",
-    ("nominal_a_stable_electronics", "envelope"): "76fac29a6bade3494873640dcfc098440ce7990e90889d55f1adfe4dc8dab9a4",
-    ("oven_000", "carrier"): "ff0b72547ab22d1d128606c62d8023ecdbcdb1eedf35601f38ba7eed34da0db5",
-    ("oven_000", "envelope"): "de962f4c7c57b2a4829e7c968824467627546b5f1e68202456f15eb974957f93",
-    ("oven_004", "carrier"): "8d4b0e71804f274e4cab388c2596c98b787ccffcb594b1c12392f1691ec3efb4",
-    ("oven_004", "envelope"): "e4bd826bef80114b5e03646f4be7f574b296122d8c67a46ab343df41808ff7cf",
-    ("pll_oven_ramp", "carrier"): "f32e99f26f9a54735730793d32b60e8ffcb482fecfd38ee488b1ce3ce6866b89",
-    ("pll_oven_ramp", "envelope"): "ee87bbe1f5cba4e04dcdfe9b19a5038495e5f5e399f683df248f7b45ac3c5f03",
-    ("pll_startup", "carrier"): "70b5a5443b8da963b90ceeea888ad228e05cf68ce2d7be44b7876da4b32e67c8",
-    ("pll_startup", "envelope"): "6b2ccd4dbf62091d06cddb7b7f50fbc6efca821083fd7cf49536954f031d6961",
-    ("population_oven", "carrier"): "210f56b2a8f06501171dc3e801be76778f88c2b263eb6285e7414856d5cd1bcc",
-    ("population_oven", "envelope"): "9c88e8b3b5b6008225d95b1416c5846734a5425f5b39a1ab62273d20eadd1900",
-    ("rate_steps", "carrier"): "67fa94a9178f82356837eccf9ee176d522c97b5484bd5c6da013f4787275391a",
-    ("rate_steps", "envelope"): "6684a76835fe7aa3befaa3f727e5532a464763a36f63ff25b1798b6dee3b295a",
-    ("rate_table", "carrier"): "91c790cd322ecea849a052211bd74f7581ab33d5b1ce9124139ec39c52efc669",
-    ("rate_table", "envelope"): "0b0801b7b0e6f311bebd47a4b56fe325012deaa1bee8161a1c15b011c6090b82",
-    ("startup", "carrier"): "3eb6fc051bec1d692b9a33a485a6aecd7926e3d86fddf6f3afa4f96202785eac",
-    ("startup", "envelope"): "512acfac9e980be75dc0e46c66321b50e1a6baceda7cde5c45b1050e3a7154ac",
-    ("static_25C", "carrier"): "0b70da4638bbb4c96286e3c805fdc4b1521a7726bbd6ee51fbba79d512c5e1b3",
-    ("static_25C", "envelope"): "aeb39e2a7e79561f1e98cf2695ac2a9cd8b106c1c8633613f7fde9d20ee4b0e6",
-    ("tune_startup", "carrier"): "693fde8a6722d4548fe6d06e6c281bf4929f915065dc06fbf419b478361b26df",
-    ("tune_startup", "envelope"): "c237b60509475615d8917cd17af91a803a7957ff18aacee3d2acf32d56858733",
-    ("tune_step", "carrier"): "62be746fab3ae692a91bcbf23835f391370d5cc29550f3e7b5fbd9cfa0dddb18",
-    ("tune_step", "envelope"): "229ea846ae06bc51dd27b97b5d1360c3d425949ebc9ab8f8531624e0742d4019",
-    ("effects_ramp", "carrier"): "ae6edf33c7b1b3c4a8be69c20fdc577f50e6aa653f0f698b8ada149a8f060dc6",
-    ("effects_ramp", "envelope"): "99ce4b8661e62368bc1ba46d137f8cb562eace034ee7c9dabbdaf8c8f9e1ea53",
+    ("force_rebalance_rate", "carrier"): "62699b72593b99848f114e93fc843f2664ecbf2ddf028d429b158ee8c95432bc",
+    ("force_rebalance_rate", "envelope"): "7d6b31c2303b02456fe41bdbdf8470621129ba6ef81333e0cae47bde2490042b",
+    ("nominal_a", "carrier"): "42c7f5b7d3a081d49f2356e0c6e3ab4b507e79e5d45482053ce0fb1fc515ea5b",
+    ("nominal_a", "envelope"): "63622ccdaa88d31593d0e9fc7181bc3fbdbc4cb30e5b30b31fb1385d796ff24e",
+    ("nominal_a_stable_electronics", "carrier"): "e589abc40662419068853fb961f90114507b6e01d4851980dbfc18941f06feed",
+    ("nominal_a_stable_electronics", "envelope"): "549df3cebde33d24aa30611ffab4a226c79ecc38e896624781fb2a6b07eb7486",
+    ("oven_000", "carrier"): "59ee74b58cdcbcc8cf0ac399f09ab1d03a56e126ad21649c903ffe43a256d4fd",
+    ("oven_000", "envelope"): "5c1a88bebbd12bf0bed4007b497510db94278e4d19efb98be684e1bcac0dadac",
+    ("oven_004", "carrier"): "292b84946b10f07531e5079237ecae37640b880eb4dcd5dd246917df1e6e52a4",
+    ("oven_004", "envelope"): "6548dabfe2afb19921da01299e14931cde7e3e7b5f9cd63f755e36baf3bd602a",
+    ("pll_oven_ramp", "carrier"): "e389177c8e4e9b4782d7437c877fe313109893276a65c50b47727f4244f5ee56",
+    ("pll_oven_ramp", "envelope"): "305b68bdad4eb0573a3cc7818c1fd63abcfeb85a810a1b6254ca64c60aac63c5",
+    ("pll_startup", "carrier"): "47b446eb05da9ae64b1527778be30713b6f721fdb6473178fb9244d01d9e971a",
+    ("pll_startup", "envelope"): "3b25ccf87df283ad53b3b161374355d435e11917872fdcbf09de604108b1ea2c",
+    ("population_oven", "carrier"): "b912f7c1c5b627650db0629a801b9cc6d74f6a253e63cc749b71036156cee72e",
+    ("population_oven", "envelope"): "27ee8de9368d00c02649ad82f84fe3f13a722979607c7e85c8bb2adacd9385dd",
+    ("rate_steps", "carrier"): "5c9dcd620d400b044ada914841c2fdd0078bfa5678f5b9ebb52e57b89b48d59c",
+    ("rate_steps", "envelope"): "c989b9a40e4d559a58ae5dbfbb7b62020536c0754b2b06ef8fe8824c7123b757",
+    ("rate_table", "carrier"): "07ef696ae503d6930a790575cbb862820200ed81364d325c3f150b625a32ad41",
+    ("rate_table", "envelope"): "4f5630aa72fcab792dcec64902ba0f415b744e7552d0a45d6d6e5186599e6137",
+    ("startup", "carrier"): "993bda2854070d9a1a057ebbdd1fe1b8f5fb51c6c005da793341b31b6ac7f645",
+    ("startup", "envelope"): "18d357d5a98fde2084c661fbd3dd6ff564c482f848b9417f70f2c0fb633b0a6c",
+    ("static_25C", "carrier"): "f6ea688debcc57883401fb4b674159391c1d7daef0ec781fc0132fd2e1fb80c8",
+    ("static_25C", "envelope"): "7b2ddfee879820fadc886a3047e77a936db8612a5c8ddf143f1d0ae8f9fc314a",
+    ("tune_startup", "carrier"): "43f06a15eb8d7670c05786d1b26eb0fae0bd951363db88ced0ff94c4930c4ac0",
+    ("tune_startup", "envelope"): "9caf0bb102f4f7fc861484d23186031c992c2fb969bc105cbf0326adc5781977",
+    ("tune_step", "carrier"): "963d6b89475e90c8d3224b28cd0aa94253255f51221693980d51e9355169d44c",
+    ("tune_step", "envelope"): "067f99aac38e69d10dbc72f2cfc0a359faf468ad6c12aa85d18f8066c0277814",
+    ("effects_ramp", "carrier"): "cfe32a308db63f514a8a4d8e919d3c977a394909793ae470070b672a192eaebe",
+    ("effects_ramp", "envelope"): "c85980020053fbef3a0faa96b341fa95cc14399a6c6b58dfeeab5bb6a271e5e8",
 }
 
 
@@ -139,6 +163,9 @@ def test_record_unchanged(name, engine, tmp_path):
     res = _run(name, engine, tmp_path)
     if not res.info["compiled"]:
         pytest.skip("no C compiler: the virtual machine's roll-out draws its noise differently")
+    if platform_key() != PLATFORM:
+        pytest.skip(f"digests made on {PLATFORM}, this is {platform_key()}: regenerate the table here "
+                    "(python -m tests.test_records_unchanged) to guard records on this platform")
     assert (name, engine) in SHA256, f"no stored digest for {name} in the {engine} engine; regenerate the table"
     assert digest(res) == SHA256[(name, engine)], (
         f"the {engine} engine's record of {name} changed; if on purpose, regenerate the table "
@@ -146,9 +173,10 @@ def test_record_unchanged(name, engine, tmp_path):
 
 
 def main() -> int:
-    """Print the digest table for pasting into :data:`SHA256`."""
+    """Print the platform and digest table for pasting over :data:`PLATFORM` and :data:`SHA256`."""
     import tempfile
     with tempfile.TemporaryDirectory() as tmp:
+        print(f'PLATFORM = "{platform_key()}"')
         print("SHA256 = {")
         for name in _cases():
             for engine in ("carrier", "envelope"):

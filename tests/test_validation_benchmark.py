@@ -32,10 +32,10 @@ def test_tiny_benchmark(tmp_path, capsys):
                 assert snr < lab["snr_target"] * 1.3, (n, snr, lab["snr_target"])
             else:
                 assert abs(np.log(snr / lab["snr_target"])) < np.log(1.3), (n, snr, lab["snr_target"])
-        # the training window's share of the signature: never (beyond the calibrations' difference) above the
-        # whole record's, and tiered like it
+        # the training window's share of the signature: never (beyond the calibrations' difference, 5 % and a
+        # tenth of an SNR unit, far below the lowest tier's edge) above the whole record's, and tiered like it
         if lab["effects"] and not lab.get("out_of_library"):
-            assert 0.0 <= lab["snr_train"] <= 1.05 * max(lab["snr"], max(lab["snr_by_effect"].values()))
+            assert 0.0 <= lab["snr_train"] <= 1.05 * max(lab["snr"], max(lab["snr_by_effect"].values())) + 0.1
             assert lab["tier_train"] in ("below", "near", "above")
     # the same stored cases diagnosed again (--cases-from): nothing is generated, the labels are read where they
     # lie, and the diagnosis being deterministic for a record, the case-by-case comparison finds no change

@@ -24,6 +24,9 @@ NOT_IDENTIFIABLE_RATIO = 0.5
 #: mostly the rate output's slow noise, which a knob combination can follow a little further at every step.
 MIN_GAIN_CHI2 = 0.5
 MIN_GAIN_REL = 1e-3
+#: How far (in tolerances) :func:`release_gains` releases a knob's bound: far enough that the linearised objective's
+#: minimum along the knob lies inside it for any knob the record pushes past its tolerance bound.
+RELEASE_TOLERANCES = 10.0
 #: |correlation| above which a pair is flagged as confounded.
 CONFOUND_CORR = 0.95
 #: Exponent of the free-molecular gas damping, Q_gas ~ T^-1/2 (physics.md section 2): the Q law's gas-only form.
@@ -59,6 +62,10 @@ class Calibration:
         Each knob's tolerance.
     objective : float
         The calibration's objective at the calibrated unit (weighted squares of the training blocks plus the priors).
+    release_gain : dict
+        Each knob at its bound (:attr:`at_bound`) -> how far the linearised objective falls when that bound alone is
+        released (:data:`RELEASE_TOLERANCES`): below the calibration's :func:`resolution` the record does not
+        ask for the bound, which holds the knob only because a flat valley of the objective reaches it.
     """
 
     theta: dict
@@ -71,12 +78,19 @@ class Calibration:
     solution: Solution
     tolerance: dict
     objective: float = float("nan")
+    release_gain: dict = dataclasses.field(default_factory=dict)
 
     @property
     def at_bound(self) -> list:
         """Knobs the fit pushed to their bound (BOUND_TOLERANCES x tolerance): the record asks for a unit
         outside its tolerance, itself a sign of an unmodelled effect."""
         return [k for k, v in self.theta.items() if abs(v) >= 0.999 * BOUND_TOLERANCES * self.tolerance[k]]
+
+    @property
+    def asked_at_bound(self) -> list:
+        """The knobs at their bound that the record asks for there: releasing the bound would lower the objective
+        by at least the calibration's :func:`resolution` (:attr:`release_gain`)."""
+        return [k for k in self.at_bound if self.release_gain.get(k, np.inf) >= resolution(self.objective)]
 
     def to_json(self, device=None) -> dict:
         """JSON form: each knob's nominal and calibrated value, its sd and tolerance, and what the record says of it.
@@ -90,14 +104,17 @@ class Calibration:
         -------
         dict
         """
-        pinned = self.at_bound
+        pinned, asked = self.at_bound, self.asked_at_bound
         out = {}
         for k, v in self.theta.items():
             knob = KNOBS_BY_NAME[k]
             row = {"value": float(v), "sd": float(self.sd[k]), "identifiable": bool(self.identifiable[k]),
                    "tolerance": self.tolerance[k], "at_bound": k in pinned,
+                   "bound_asked_by_record": k in asked,
                    "beyond_tolerance": bool(abs(v) > self.tolerance[k] + 2.0 * self.sd[k]),
                    "group": knob.group, "meaning": knob.meaning}
+            if k in self.release_gain:
+                row["release_gain"] = float(self.release_gain[k])
             if knob.effect:
                 row["effect"] = knob.effect
             if device is not None:
@@ -105,7 +122,8 @@ class Calibration:
                 row.update(nominal=nom, calibrated=calv,
                            sd_calibrated=abs(knob_values(device, k, float(v) + float(self.sd[k]))[1] - calv))
             out[k] = row
-        return {"parameters": out, "at_bound": pinned,
+        return {"parameters": out, "at_bound": pinned, "at_bound_asked": asked,
+                "resolution": resolution(self.objective),
                 "not_identifiable": [k for k, ok in self.identifiable.items() if not ok],
                 "confounded_pairs": [{"a": a, "b": b, "corr": float(c)} for a, b, c in self.correlated],
                 "iterations": self.iterations}
@@ -167,6 +185,42 @@ def law_starts(knobs: KnobSet, device) -> list:
         n0 = float(device.values["thermal"]["q_gas_exponent"])
         start["q_gas_exponent"] = float(np.clip(FREE_MOLECULAR_EXPONENT - n0, ks.lo[j], ks.hi[j]))
     return [start]
+
+
+def release_gains(fitter: Fitter, lin: Lin, rows: np.ndarray, names: list) -> dict:
+    """How far the linearised calibration objective falls when the bound of each knob in ``names`` alone is
+    released to :data:`RELEASE_TOLERANCES` tolerances.
+
+    Parameters
+    ----------
+    fitter : Fitter
+    lin : Lin
+        Linearisation at the calibrated unit.
+    rows : ndarray of bool
+        Training blocks.
+    names : list of str
+        Knobs at their bound.
+
+    Returns
+    -------
+    dict
+        Knob -> fall of the objective (weighted squares plus priors; >= 0).
+    """
+    pr = np.isfinite(lin.prior_sd)
+
+    def objective(l: Lin) -> float:
+        s = fitter.solve(l, rows)
+        return s.cost + float(np.sum((s.x[pr] / l.prior_sd[pr]) ** 2))
+
+    held = objective(lin)
+    tol = fitter.knobs.tolerance
+    out = {}
+    for name in names:
+        i = lin.names.index(name)
+        lo, hi = lin.lo.copy(), lin.hi.copy()
+        lo[i], hi[i] = -RELEASE_TOLERANCES * tol[i], RELEASE_TOLERANCES * tol[i]
+        out[name] = max(held - objective(dataclasses.replace(lin, lo=lo, hi=hi)), 0.0)
+    return out
 
 
 def _hold(lin: Lin, held: list) -> Lin:
@@ -265,4 +319,6 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
             if abs(corr[i, j]) > CONFOUND_CORR:
                 pairs.append((knobs.names[i], knobs.names[j], float(corr[i, j])))
     sd = {n: float(sd_post[i]) for i, n in enumerate(knobs.names)}
-    return Calibration(theta, sd, ident, pairs, lin, base, it, sol, dict(zip(knobs.names, map(float, tolv))), obj)
+    cal = Calibration(theta, sd, ident, pairs, lin, base, it, sol, dict(zip(knobs.names, map(float, tolv))), obj)
+    cal.release_gain = release_gains(fitter, lin, rows, cal.at_bound)
+    return cal

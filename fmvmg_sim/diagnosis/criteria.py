@@ -111,9 +111,9 @@ class ParameterSignificant(Criterion):
 class ExplainsHeldOutGap(Criterion):
     """The candidate shrinks the held-out gap its baseline leaves by at least :data:`SHRINK_FLOOR`
     (:meth:`~.heldout.Scorer.shrink`: the excess of the held-out residual over the null's noise, summed over the
-    channels in units of the null's). A candidate can pass every likelihood test on a record whose nominal model
-    fits to within the noise (a null unit), by trimming a noise fluctuation or a model floor: it then explains
-    nothing a user could see, and its shrink is near zero."""
+    channels in units of the null's, at least one held-out sigma squared). A candidate can pass every likelihood
+    test on a record whose nominal model fits to within the noise (a null unit), by trimming a noise fluctuation or
+    a model floor: it then explains nothing a user could see, and its shrink is near zero."""
 
     def passes(self, ev) -> bool:  # noqa: D102
         return ev.shrink is not None and ev.shrink >= SHRINK_FLOOR

@@ -49,8 +49,15 @@ FOLD_JOIN_NATS = 5.0
 #: determine a temperature law, and its test would score an arbitrary extrapolation.
 MIN_TRAIN_SPAN_K = 5.0
 
-#: The headline gap: held-out excess mean square over the null's, in units of the null's, summed over channels.
+#: The headline gap: held-out excess mean square over the null's, in units of the null's (at least
+#: :data:`GAP_UNIT_Z2`), summed over channels.
 TOTAL_GAP = "total_excess_over_noise"
+#: The least unit of a channel's held-out gap, in squared held-out sigmas. A channel whose sigma is a model floor or
+#: the laws' stated accuracy (the drive frequency, a law extrapolated beyond the training temperatures) has null
+#: replicates far inside it (mean square 1e-5 of it): in the null's units, a misfit a hundredth of that sigma would
+#: read as a gap of tens and outweigh a rate channel whose gap is many sigmas. One sigma squared is what the channel
+#: states it can resolve.
+GAP_UNIT_Z2 = 1.0
 
 
 @dataclass
@@ -356,8 +363,8 @@ class Scorer:
 
     def gaps(self, pred: np.ndarray) -> dict:
         """Held-out excess mean squares over the null's, plus the located gap (:data:`TOTAL_GAP`): the excess of each
-        channel's residual in its held-out sigmas (:func:`heldout_sigma`) over the null's, in units of the null's,
-        summed over the channels.
+        channel's residual in its held-out sigmas (:func:`heldout_sigma`) over the null's, in units of the null's or
+        of :data:`GAP_UNIT_Z2` where the null's is smaller, summed over the channels.
 
         Parameters
         ----------
@@ -372,8 +379,8 @@ class Scorer:
         ms = self.metrics(pred)
         out = {k: max(0.0, v - noise.get(k, 0.0)) for k, v in ms.items() if not k.startswith("z2_")}
         # the located gap: each channel's held-out excess over the null's, in its sigmas (noise and the laws'
-        # accuracy beyond the training temperatures), in units of the null's
-        out[TOTAL_GAP] = float(sum(max(0.0, v - noise[k]) / noise[k] for k, v in ms.items()
+        # accuracy beyond the training temperatures), in units of the null's: at least one sigma squared
+        out[TOTAL_GAP] = float(sum(max(0.0, v - noise[k]) / max(noise[k], GAP_UNIT_Z2) for k, v in ms.items()
                                    if k.startswith("z2_") and noise.get(k, 0.0) > 0))
         return out
 

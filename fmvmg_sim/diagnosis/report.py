@@ -135,8 +135,10 @@ def calibration_lines(cal: dict) -> list[str]:
          "| knob | group | nominal | calibrated | sd | deviation | tolerance | identifiable | note |",
          "|---|---|---|---|---|---|---|---|---|"]
     for k, v in cal["parameters"].items():
-        note = ("**at its bound**" if v.get("at_bound") else "beyond its tolerance" if v.get("beyond_tolerance")
-                else "")
+        asked = v.get("bound_asked_by_record", True)
+        note = ("**at its bound**" if v.get("at_bound") and asked
+                else "at its bound, not asked by the record" if v.get("at_bound")
+                else "beyond its tolerance" if v.get("beyond_tolerance") else "")
         if note and v.get("effect"):
             note += f" (see {v['effect']})"
         L.append(f"| {k} | {v.get('group', '')} | {_fmt(v.get('nominal'), '.6g')} | {_fmt(v.get('calibrated'), '.6g')} "
@@ -150,10 +152,16 @@ def calibration_lines(cal: dict) -> list[str]:
     if cal.get("not_identifiable"):
         L += ["", f"Not identifiable from this record (their posterior is not much narrower than their tolerance): "
               f"{', '.join(cal['not_identifiable'])}."]
-    if cal.get("at_bound"):
-        laws = [k for k in cal["at_bound"] if cal["parameters"][k].get("group") == "law"]
+    asked = cal.get("at_bound_asked", cal.get("at_bound", []))
+    flat = [k for k in cal.get("at_bound", []) if k not in asked]
+    if flat:
+        L += ["", f"At their bound but not asked there by the record ({', '.join(flat)}): releasing the bound would "
+              f"lower the objective by less than the calibration's resolution ({_fmt(cal.get('resolution'), '.3g')}); "
+              "the objective is flat along them, and any value on that way fits the record as well."]
+    if asked:
+        laws = [k for k in asked if cal["parameters"][k].get("group") == "law"]
         L += ["", "The record asks for knobs outside the unit's stated uncertainty "
-              f"({', '.join(cal['at_bound'])}): the nominal model within its tolerances does not reproduce it."]
+              f"({', '.join(asked)}): the nominal model within its tolerances does not reproduce it."]
         if laws:
             L += [f"A temperature law at its bound ({', '.join(laws)}) is a nominal law off by more than its tolerance: "
                   "its library effect (noted beside it) describes the rest, and is reported when it passes the "

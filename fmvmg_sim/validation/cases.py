@@ -31,6 +31,7 @@ from ..diagnosis.fitting import PATH_EFFECTS, Fitter
 from ..diagnosis.forward import CHANNELS, IRATE
 from ..diagnosis.likelihood import innovations, slow_state_fit
 from ..diagnosis.model import EffectModel
+from ..diagnosis.pipeline import recalibrated
 from ..diagnosis.parameters import KnobSet, apply_nominal, flip_quadrature
 from ..effects import MODELS, EffectSet, validate_effects
 from ..envelope.engine import run_envelope
@@ -637,15 +638,26 @@ def _calibrated_truth(record_path, device_nominal, theta: dict, det: dict, train
     window, the last forward-chained fold's training blocks)."""
     rec = read_record(record_path, warn_unknown=False)
     sf = device_nominal.nominal_scale_factor_V_per_dps
-    fit = Fitter(prepare(rec, sf), device_nominal, tables=_CASE_TABLES.get())
+    prep = prepare(rec, sf)
+    fit = Fitter(prep, device_nominal, tables=_CASE_TABLES.get())
     fit.delay_s = theta.get("temperature_delay_s", 0.0)  # the temperature the unit saw
     path = fit.path({n: v for n, v in det.items() if n in PATH_EFFECTS})
     truth = fit.through_channels(theta, fit.table(theta, det, quad=True, rate=True).evaluate(
         path["die_b"], path["rate_b"], path["quad_b"]))
     truth[:, ~fit.present] = np.nan
     fit.Y = truth
+
+    def new_fitter():
+        f = Fitter(prep, device_nominal, tables=_CASE_TABLES.get())
+        f.Y = truth
+        return f
+
     rows = fit.prep.folds()[-1]["train"] if training else np.ones(fit.prep.n_blocks, bool)
-    return fit, calibrate(fit, rows)
+    # calibrated as the diagnosis calibrates (from its other starts too): what the diagnosis' calibration absorbs of
+    # the unit is not the effect's signature
+    fit, cal = recalibrated(fit, calibrate(fit, rows), rows, new_fitter)
+    fit.delay_s = cal.theta.get("temperature_delay_s", 0.0)
+    return fit, cal
 
 
 def _whitened_norm(fit, pred: np.ndarray, noise: list, rows: np.ndarray | None = None) -> float:
