@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .effort_law import effort_law_start
 from .fitting import Fitter, Lin, Solution, scaled_inverse
 from ..uncertainty import BOUND_TOLERANCES, KNOBS_BY_NAME
 from .parameters import KnobSet, knob_values
@@ -63,7 +64,8 @@ class Calibration:
     objective : float
         The calibration's objective at the calibrated unit (weighted squares of the training blocks plus the priors).
     release_gain : dict
-        Each knob at its bound (:attr:`at_bound`) -> how far the linearised objective falls when that bound alone is
+        Set by the diagnosis for the calibration it reports (:func:`release_gains`): each knob at its bound
+        (:attr:`at_bound`) -> how far the linearised objective falls when that bound alone is
         released (:data:`RELEASE_TOLERANCES`): below the calibration's :func:`resolution` the record does not
         ask for the bound, which holds the knob only because a flat valley of the objective reaches it.
     """
@@ -319,6 +321,38 @@ def calibrate(fitter: Fitter, rows: np.ndarray, max_iter: int = 25, tol: float =
             if abs(corr[i, j]) > CONFOUND_CORR:
                 pairs.append((knobs.names[i], knobs.names[j], float(corr[i, j])))
     sd = {n: float(sd_post[i]) for i, n in enumerate(knobs.names)}
-    cal = Calibration(theta, sd, ident, pairs, lin, base, it, sol, dict(zip(knobs.names, map(float, tolv))), obj)
-    cal.release_gain = release_gains(fitter, lin, rows, cal.at_bound)
-    return cal
+    return Calibration(theta, sd, ident, pairs, lin, base, it, sol, dict(zip(knobs.names, map(float, tolv))), obj)
+
+
+def recalibrated(fitter: Fitter, cal, train: np.ndarray, new_fitter) -> tuple:
+    """``cal`` (of ``fitter``) or, when it fits the training window better by more than the calibration's resolution
+    (:func:`resolution`), the calibration from the Q law's other form (:func:`law_starts`) or
+    from the Q law and effort channel that fit the AGC effort alone (:func:`.effort_law.effort_law_start`).
+
+    From the nominal unit, Levenberg-Marquardt steps crawl along the Q law's valley and can stop far from the fit
+    these starts reach (a unit whose AGC effort the nominal start leaves thousands of sigmas off).
+
+    Parameters
+    ----------
+    fitter : Fitter
+    cal : Calibration
+        ``fitter``'s calibration from the nominal unit.
+    train : ndarray of bool
+        Training blocks.
+    new_fitter : callable
+        Returns a fresh Fitter on the same observations, for each start.
+
+    Returns
+    -------
+    fitter : Fitter
+    cal : Calibration
+    """
+    best = (fitter, cal)
+    for start in law_starts(fitter.knobs, fitter.device0) + [effort_law_start(fitter, cal, train)]:
+        if start is None:
+            continue
+        f = new_fitter()
+        c = calibrate(f, train, start=start)
+        if c.objective < best[1].objective - resolution(best[1].objective):
+            best = (f, c)
+    return best

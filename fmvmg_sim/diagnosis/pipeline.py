@@ -29,9 +29,8 @@ from ..record import Record, read_record
 from ..scenario import load_scenario
 from . import localize as loc
 from .attribution import CandidateFitter, attribute
-from .calibrate import calibrate, law_starts, resolution
+from .calibrate import calibrate, recalibrated, release_gains
 from .data import Prepared, difference_sigma, prepare
-from .effort_law import effort_law_start
 from .detection import detection_limits
 from .fitting import DEVICE_EFFECTS, Fitter
 from .forward import CHANNELS, IQUAD, IRATE
@@ -55,7 +54,7 @@ BIAS_SCALE_MAX = 30.0
 MAGNITUDE_FACTOR = 30.0
 
 __all__ = ["N_NULL", "diagnose", "load_inputs", "calibrated", "localise", "record_scale_factor", "check_units",
-           "library_bias_dps", "recalibrated"]
+           "library_bias_dps"]
 
 
 def diagnose(record_path, scenario_path, n_null: int = N_NULL, seed: int = 0, progress: bool | None = None,
@@ -100,6 +99,7 @@ def _diagnose(record_path, scenario_path, n_null: int, seed: int, progress, log)
     show = progress if progress is not None else prep.duration_s > 4 * 3600
     train = prep.folds()[-1]["train"]
     fitter, cal = calibrated(prep, scn.device_nominal, train)
+    cal.release_gain = release_gains(fitter, cal.lin, train, cal.at_bound)
     die_b = fitter.path(None)["die_b"]
     fitter.set_score_floor(cal.base, die_b, DIE_FLOOR_K)
     fitter.set_law_accuracy(cal.base, die_b, train)
@@ -189,40 +189,6 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
     f, cal = recalibrated(*best, train, lambda: Fitter(prep, f0.device0, quadrature_polarity=f0.quadrature_polarity))
     f.delay_s = cal.theta.get("temperature_delay_s", 0.0)
     return f, cal
-
-
-def recalibrated(fitter: Fitter, cal, train: np.ndarray, new_fitter) -> tuple:
-    """``cal`` (of ``fitter``) or, when it fits the training window better by more than the calibration's resolution
-    (:func:`.calibrate.resolution`), the calibration from the Q law's other form (:func:`.calibrate.law_starts`) or
-    from the Q law and effort channel that fit the AGC effort alone (:func:`.effort_law.effort_law_start`).
-
-    From the nominal unit, Levenberg-Marquardt steps crawl along the Q law's valley and can stop far from the fit
-    these starts reach (a unit whose AGC effort the nominal start leaves thousands of sigmas off).
-
-    Parameters
-    ----------
-    fitter : Fitter
-    cal : Calibration
-        ``fitter``'s calibration from the nominal unit.
-    train : ndarray of bool
-        Training blocks.
-    new_fitter : callable
-        Returns a fresh Fitter on the same observations, for each start.
-
-    Returns
-    -------
-    fitter : Fitter
-    cal : Calibration
-    """
-    best = (fitter, cal)
-    for start in law_starts(fitter.knobs, fitter.device0) + [effort_law_start(fitter, cal, train)]:
-        if start is None:
-            continue
-        f = new_fitter()
-        c = calibrate(f, train, start=start)
-        if c.objective < best[1].objective - resolution(best[1].objective):
-            best = (f, c)
-    return best
 
 
 def quadrature_conventions(prep: Prepared, device) -> list:

@@ -25,13 +25,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..diagnosis.calibrate import calibrate
+from ..diagnosis.calibrate import calibrate, recalibrated
 from ..diagnosis.data import prepare
 from ..diagnosis.fitting import PATH_EFFECTS, Fitter
 from ..diagnosis.forward import CHANNELS, IRATE
 from ..diagnosis.likelihood import innovations, slow_state_fit
 from ..diagnosis.model import EffectModel
-from ..diagnosis.pipeline import recalibrated
 from ..diagnosis.parameters import KnobSet, apply_nominal, flip_quadrature
 from ..effects import MODELS, EffectSet, validate_effects
 from ..envelope.engine import run_envelope
