@@ -109,6 +109,10 @@ def test_a_misread_block_costs_a_bounded_amount():
     # a Gaussian would charge (L / sd)^2 / 2 = 5000 nats; the mixture charges log(1/MISREAD) + log(L / 2 sd) + ...
     bound = np.log(1 / MISREAD) + np.log(lsb / 2 / 1e-4) + 2.0 + 1.0
     assert 0 < (wrong - right)[0] < bound
+    # a model off by far more than any step (a candidate outside its domain) costs without bound, silently
+    with np.errstate(all="raise"):
+        far = misread_nll(np.array([1e200, np.nan]), np.array([-1e200, 0.0]), np.array([v[0], v[0]]), lsb, S)
+    assert far[0] == np.inf and np.isnan(far[1])
 
 
 @pytest.mark.parametrize("tau_steps", [0.15, 0.5, 0.85, 1.6, 6.0])

@@ -86,6 +86,29 @@ def test_rate_stuck_on_one_level_takes_the_quadrature_step():
     assert prepare(Record(cols, {}), 0.01).lattice()[CHANNELS.index("rate_V")] == 0.0
 
 
+def test_a_lattice_shifted_by_an_offset_after_the_converter_is_found_and_read_off():
+    """An offset the data acquisition adds after the converter (here 17.8 mV on a 6 mV step: 0.97 of a step off the
+    zero-through lattice) leaves the samples on a shifted lattice: its step and phase are read, every sample is on it,
+    and the quantisation candidate is named with the record's step."""
+    from fmvmg_sim.diagnosis.data import lattice_offset, on_lattice
+    from fmvmg_sim.diagnosis.noise_effects import quantization_candidate
+
+    rng = np.random.default_rng(5)
+    n, lsb, off = 7200, 0.0060027, 0.0178
+    t = np.arange(1.0, n + 1.0)
+    slow = 0.03 * np.sin(2 * np.pi * t / 5000.0)
+    rate_V = np.round((slow + 1e-3 * rng.standard_normal(n)) / lsb) * lsb + off
+    cols = {"time_s": t, "temperature_C": np.full(n, 25.0), "rate_dps": rate_V / 0.01, "rate_V": rate_V,
+            "rate_true_dps": np.zeros(n)}
+    prep = prepare(Record(cols, {}), 0.01)
+    i = CHANNELS.index("rate_V")
+    assert on_lattice(rate_V, lsb, offset_V=0.0) < 0.05               # read through zero, the lattice is missed
+    assert abs(lattice_offset(rate_V, lsb) - np.mod(off, lsb)) < 1e-9
+    assert abs(prep.lattice()[i] - lsb) < 1e-9 and abs(prep.lattice_offsets()[i] - np.mod(off, lsb)) < 1e-9
+    q = quantization_candidate(prep, nominal_lsb_V=1e-4)
+    assert q is not None and abs(q["lsb_V"] - lsb) < 1e-9 and q["on_lattice"] == 1.0
+
+
 def _temperature_record(temp_C, n=7200):
     t = np.arange(1.0, n + 1.0)
     cols = {"time_s": t, "temperature_C": temp_C(t), "rate_dps": np.zeros(n), "rate_true_dps": np.zeros(n)}

@@ -58,11 +58,14 @@ class Converter:
         Per-sample white noise before the quantiser.
     slow_V : float
         Block-level slow noise before the quantiser (sd of a noise-only block mean about the model).
+    offset_V : float
+        Where the lattice passes, ``offset_V + k * lsb_V`` (an offset added after the converter shifts it).
     """
 
     lsb_V: float
     tau_V: float
     slow_V: float
+    offset_V: float = 0.0
 
 
 def staircase_visible(lsb_V: float, tau_V: float) -> bool:
@@ -173,14 +176,16 @@ def misread_nll(y: np.ndarray, mean: np.ndarray, var: np.ndarray, lsb: float, sc
     Returns
     -------
     ndarray
-        NaN where ``y`` or ``mean`` is.
+        NaN where ``y`` or ``mean`` is; +inf where the prediction is so far off that neither part has a density.
     """
     var = np.asarray(var, dtype=float)
     wide = var + 0.25 * lsb ** 2
-    d2 = (np.asarray(y, dtype=float) - mean) ** 2
-    a = np.log(1.0 - MISREAD) - 0.5 * np.log(2 * np.pi * var) - 0.5 * d2 / var
-    b = np.log(MISREAD) - 0.5 * np.log(2 * np.pi * wide) - 0.5 * d2 / wide
-    return -(np.logaddexp(a, b) + np.log(scale))
+    with np.errstate(over="ignore", invalid="ignore"):
+        d2 = (np.asarray(y, dtype=float) - mean) ** 2
+        a = np.log(1.0 - MISREAD) - 0.5 * np.log(2 * np.pi * var) - 0.5 * d2 / var
+        b = np.log(MISREAD) - 0.5 * np.log(2 * np.pi * wide) - 0.5 * d2 / wide
+        out = -(np.logaddexp(a, b) + np.log(scale))
+    return np.where(np.isneginf(a) & np.isneginf(b), np.inf, out)
 
 
 def _p_same_level(s: float) -> float:

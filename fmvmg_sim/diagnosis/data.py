@@ -95,8 +95,10 @@ def lattice_lsb(x_V: np.ndarray) -> tuple[float, float]:
     return lsb, on_lattice(x, lsb)
 
 
-def on_lattice(x_V: np.ndarray, lsb_V: float) -> float:
-    """Fraction of the finite samples within 2 % of a step of the lattice ``k * lsb_V``.
+def lattice_offset(x_V: np.ndarray, lsb_V: float) -> float:
+    """Where the lattice of step ``lsb_V`` a signal lives on passes, ``offset + k * lsb_V``: the circular mean of the
+    samples' phase on it. A converter's lattice passes through its zero, but an offset the data acquisition adds after
+    it (a DAQ zero, a subtracted bias) shifts it by any fraction of a step.
 
     Parameters
     ----------
@@ -106,10 +108,37 @@ def on_lattice(x_V: np.ndarray, lsb_V: float) -> float:
     Returns
     -------
     float
+        In ``[0, lsb_V)``; 0 without finite samples.
     """
     x = np.asarray(x_V, dtype=float)
-    x = x[np.isfinite(x)] / lsb_V
-    return float(np.mean(np.abs(x - np.round(x)) < 0.02)) if len(x) else 0.0
+    x = x[np.isfinite(x)]
+    if not len(x) or not lsb_V > 0:
+        return 0.0
+    z = np.mean(np.exp(2j * np.pi * (x / lsb_V)))
+    return float(np.mod(np.angle(z) / (2 * np.pi), 1.0) * lsb_V) if abs(z) > 0 else 0.0
+
+
+def on_lattice(x_V: np.ndarray, lsb_V: float, offset_V: float | None = None) -> float:
+    """Fraction of the finite samples within 2 % of a step of the lattice ``offset_V + k * lsb_V``.
+
+    Parameters
+    ----------
+    x_V : ndarray
+    lsb_V : float
+    offset_V : float, optional
+        Where the lattice passes; default the samples' own (:func:`lattice_offset`).
+
+    Returns
+    -------
+    float
+    """
+    x = np.asarray(x_V, dtype=float)
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return 0.0
+    off = lattice_offset(x, lsb_V) if offset_V is None else offset_V
+    u = (x - off) / lsb_V
+    return float(np.mean(np.abs(u - np.round(u)) < 0.02))
 
 
 @dataclass
@@ -250,6 +279,16 @@ class Prepared:
         if key not in self._cache:
             self._cache[key] = lattice_lsb(self.obs[ch]) if ch in self.channels else (0.0, 0.0)
         return self._cache[key]
+
+    def lattice_offsets(self) -> np.ndarray:
+        """Where each channel's lattice passes (:func:`lattice_offset`; 0 where there is no lattice), shape (C,).
+
+        Returns
+        -------
+        ndarray
+        """
+        L = self.lattice()
+        return np.array([lattice_offset(self.obs[c], L[i]) if L[i] > 0 else 0.0 for i, c in enumerate(CHANNELS)])
 
     def lattice(self) -> np.ndarray:
         """The recorder's resolution per channel (0 where the samples are not on a lattice), shape (C,).

@@ -423,8 +423,12 @@ class Fitter:
             col[:, c] = {"gain": sign * raw[:, c], "gain_tc": sign * raw[:, c] * self._dT_b}.get(k.kind, 1.0)
             cols.append(col)
         ks = self.knobs
-        return Lin(y0, np.stack(cols, axis=-1), ks.names, np.array([theta.get(n, 0.0) for n in ks.names]),
-                   ks.tolerance.copy(), ks.lo, ks.hi)
+        x0 = np.array([theta.get(n, 0.0) for n in ks.names])
+        for i, k in enumerate(ks.knobs):
+            if k.kind == "delay":
+                # the path reads the temperature at the model's delay: a ``theta`` at another moves linearly from it
+                y0 = y0 + cols[i] * (x0[i] - self.delay_s)
+        return Lin(y0, np.stack(cols, axis=-1), ks.names, x0, ks.tolerance.copy(), ks.lo, ks.hi)
 
     def solve(self, lin: Lin, rows: np.ndarray, Y: np.ndarray | None = None, damping: float = 0.0) -> Solution:
         """Weighted, prior-regularised, bounded linear least squares on the blocks in ``rows``.
@@ -613,7 +617,8 @@ class Fitter:
             tau_c = np.sqrt(FLOORS[CHANNELS[c]] ** 2 + np.clip(Ss ** 2 - S ** 2, 0.0, None) + cv.slow_V ** 2
                             + sd ** 2)
             n = np.maximum(self.prep.block_counts(CHANNELS[c])[rows], 1)
-            out[c] = staircase_moments(pred[rows, c], cv.lsb_V, cv.tau_V, tau_c, n)
+            m, v = staircase_moments(pred[rows, c] - cv.offset_V, cv.lsb_V, cv.tau_V, tau_c, n)
+            out[c] = (m + cv.offset_V, v)
         return out
 
     def converter_nll(self, moments: dict, rows: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:

@@ -90,7 +90,7 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
     rp = np.concatenate([[prep.rate_true_dps[0]], prep.rate_true_dps[keep]])
     idx = np.clip(np.round(prep.t_s / dt).astype(int) - 1, 0, None)
     # the record's own resolution (a coarser converter than the scenario's) applies to the null too
-    lattice = prep.lattice()
+    lattice, offsets = prep.lattice(), prep.lattice_offsets()
     out = []
     bar = tqdm(devices, disable=not progress, file=sys.stderr, desc="null re-simulation", unit="run")
     for k, device in enumerate(bar):
@@ -108,7 +108,7 @@ def null_records(scn, devices: list, prep: Prepared, seed: int, progress: bool =
                  if c in CHANNELS}
         if raw is not None:
             raw.append({c: x[c] for j, c in enumerate(CHANNELS) if lattice[j] > 0})
-        out.append({c: quantize(x[c], lattice[j]) for j, c in enumerate(CHANNELS)})
+        out.append({c: quantize(x[c] - offsets[j], lattice[j]) + offsets[j] for j, c in enumerate(CHANNELS)})
     return out
 
 

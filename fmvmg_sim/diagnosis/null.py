@@ -151,7 +151,7 @@ def converter_model(prep: Prepared, raw_nulls: list, null_preds: list) -> dict:
     out = {}
     if not raw_nulls:
         return out
-    L = prep.lattice()
+    L, offsets = prep.lattice(), prep.lattice_offsets()
     for c in CONVERTER_CHANNELS:
         i = CHANNELS.index(c)
         if c not in prep.channels or not L[i] > 0:
@@ -171,7 +171,7 @@ def converter_model(prep: Prepared, raw_nulls: list, null_preds: list) -> dict:
                         else np.nan)
         tau, sl = float(np.nanmedian(taus)), float(np.nanmedian(slow))
         if staircase_visible(float(L[i]), tau) and np.isfinite(sl):
-            out[i] = Converter(float(L[i]), tau, sl)
+            out[i] = Converter(float(L[i]), tau, sl, float(offsets[i]))
     return out
 
 
