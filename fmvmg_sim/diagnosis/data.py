@@ -287,8 +287,11 @@ class Prepared:
         -------
         ndarray
         """
-        L = self.lattice()
-        return np.array([lattice_offset(self.obs[c], L[i]) if L[i] > 0 else 0.0 for i, c in enumerate(CHANNELS)])
+        if "lattice_offsets" not in self._cache:
+            L = self.lattice()
+            self._cache["lattice_offsets"] = np.array([lattice_offset(self.obs[c], L[i]) if L[i] > 0 else 0.0
+                                                       for i, c in enumerate(CHANNELS)])
+        return self._cache["lattice_offsets"].copy()
 
     def lattice(self) -> np.ndarray:
         """The recorder's resolution per channel (0 where the samples are not on a lattice), shape (C,).
