@@ -22,7 +22,7 @@ from .data import CONVERTER_CHANNELS, ON_LATTICE_MIN, Prepared, difference_sigma
 from .fitting import Fitter
 from .forward import CHANNELS, IRATE
 from .heldout import heldout_blocks, heldout_metrics, heldout_sigma
-from .likelihood import slow_state_fit
+from .likelihood import innovations, slow_state_fit
 from .noise_match import matched_noise
 from .windows import window_masks, window_stats
 
@@ -197,6 +197,37 @@ def pooled_noise_model(null_Z: list) -> list:
             continue
         rho, K, s = slow_state_fit(series)
         out.append((rho, K, max(s, NOISE_SD_FLOOR)))
+    return out
+
+
+def accuracy_floored(params: list, Z_train: np.ndarray) -> list:
+    """The null's noise model with each auxiliary channel's innovation sd floored at the record's own: what the
+    calibrated model leaves on the record's training window, filtered as the null's model filters it.
+
+    The null replicates are the nominal model's own units, so their auxiliary channels (the drive amplitude, the AGC
+    effort, the drive frequency) follow its laws to the noise and their innovations sit far below the scoring sigma.
+    A unit's laws and data acquisition never match the nominal ones that closely: its calibrated residual there is
+    the model's accuracy, and a noise model tighter than it weighs a channel's model error as evidence. The rate
+    output's noise has its own judgement (the flicker band, :func:`record_rate_noise`).
+
+    Parameters
+    ----------
+    params : list of tuple or None
+        ``(rho, K, s)`` per channel (:func:`pooled_noise_model`).
+    Z_train : ndarray, shape (n, C)
+        The record's scoring residual against its calibration on the training blocks.
+
+    Returns
+    -------
+    list of tuple or None
+    """
+    out = list(params)
+    for c, par in enumerate(params):
+        if par is None or c == IRATE or np.isfinite(Z_train[:, c]).sum() < 10:
+            continue
+        rho, K, s = par
+        e = innovations(Z_train[:, c], rho, K)
+        out[c] = (rho, K, max(s, float(np.sqrt(np.nanmean(e[1:] ** 2)))))
     return out
 
 

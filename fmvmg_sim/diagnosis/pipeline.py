@@ -37,7 +37,7 @@ from .forward import CHANNELS, IQUAD, IRATE
 from .heldout import Scorer
 from .likelihood import slow_state_fit
 from .noise_effects import FlickerBand, quantization_candidate
-from .null import N_NULL, NOISE_SD_FLOOR, Null, rate_residual, simulate_null
+from .null import N_NULL, NOISE_SD_FLOOR, Null, accuracy_floored, rate_residual, simulate_null
 from .parameters import flip_quadrature
 from .report import assemble
 from .rules import verdict
@@ -108,7 +108,9 @@ def _diagnose(record_path, scenario_path, n_null: int, seed: int, progress, log)
     null = simulate_null(scn, fitter, cal, n_null, seed, progress=show)
     where = localise(fitter, cal, null)
     log(f"localisation: {len(where.significant)} statistics beyond the null band")
-    scorer = Scorer(fitter, cal, null.noise_params, null.noise_ms)
+    # scored at no better than the calibrated model's own accuracy on the record's auxiliary channels
+    noise = accuracy_floored(null.noise_params, fitter.residual(cal.lin.predict(cal.solution.x), scoring=True)[train])
+    scorer = Scorer(fitter, cal, noise, null.noise_ms)
     flicker = FlickerBand(prep, null.allan_heldout, null.allan_train)
     cands = CandidateFitter(scorer, closure=lambda pred: closes(fitter, where, null, pred),
                             flicker=lambda pred: record_rate_noise(fitter, flicker, scorer, pred))
