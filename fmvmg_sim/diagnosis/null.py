@@ -208,7 +208,7 @@ def accuracy_floored(params: list, Z_train: np.ndarray) -> list:
     effort, the drive frequency) follow its laws to the noise and their innovations sit far below the scoring sigma.
     A unit's laws and data acquisition never match the nominal ones that closely: its calibrated residual there is
     the model's accuracy, and a noise model tighter than it weighs a channel's model error as evidence. The rate
-    output's noise has its own judgement (the flicker band, :func:`record_rate_noise`).
+    output's noise has its own judgement (the flicker band, :func:`.pipeline.record_rate_noise`).
 
     Parameters
     ----------
