@@ -194,7 +194,10 @@ class EffectModel:
         # base prediction includes device effects at their current values; path effect amplitudes start at 0
         for n in self.names:
             if n == "thermal_lag":
-                cols.append(self.base.die_slope(die)); names.append("thermal_lag.offset_K")
+                # its time constant alone (the path's): a constant die-case offset shifts every law's temperature
+                # the way the calibrated temperature coefficients re-centre, so beside them it is near-degenerate and
+                # the laws' second-order differences pull it to a bound, where the bounds criterion refuses a right lag
+                continue
             elif n == "temperature_rate":
                 cols.append(self.base.spline("d_rate")(die) * (path["dTdt_b"] / 3600.0)[:, None])
                 names.append("temperature_rate.g_dph_per_K_per_min")
