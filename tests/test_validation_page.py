@@ -40,17 +40,18 @@ def test_the_diagnosis_section_tabulates_a_finished_run_without_its_record_names
     and carries each scenario's rates; a default page leaves it out, and a folder without scores is refused."""
     rows = {"rec_a": score_case({"effects": {}}, {"verdict": "none", "accepted": [], "ambiguous_with": {},
                                                    "ranked": [], "rules_fired": []}),
-            "rec_b": score_case({"effects": {"duffing": {}}, "strength": {"duffing": "clear"}},
+            "rec_b": score_case({"effects": {"duffing": {"k3_rel": -0.002}}, "strength": {"duffing": "clear"}},
                                 {"verdict": "explained", "accepted": ["duffing"], "ambiguous_with": {},
-                                 "ranked": [{"effect": "duffing", "shrink": 0.7}], "rules_fired": []})}
+                                 "ranked": [{"effect": "duffing", "shrink": 0.7}], "rules_fired": [],
+                                 "detection_limits": {"effects": {"duffing": {"params": {"k3_rel": 0.001}}}}})}
     res = {"folder": "/somewhere/records", "shrink_floor": 0.2,
            "scenarios": {"nominal_a": {"rows": rows, "summary": summary(rows)}}}
     (tmp_path / "scores.json").write_text(json.dumps(res))
     out = tmp_path / "v.md"
     assert page.main(["--only", "diagnosis", "--diagnosis-results", str(tmp_path), "-o", str(out)]) == 0
     md = out.read_text()
-    assert "| 2 | duffing (clear) | explained | duffing (0.70) | yes |" in md
-    assert "| nominal_a | 1 / 1 | 1 / 1 | 1 / 1 | 0 / 0 | 0 | 0 |" in md
+    assert "| 2 | duffing (clear) | explained | duffing (0.70) | 2 | yes |" in md
+    assert "| nominal_a | 1 / 1 | 1 / 1 | 1 / 1 | 1 / 1 | 0 / 0 | 0 | 0 |" in md
     assert "rec_a" not in md and "rec_b" not in md
     assert "diagnosis" in page.OPT_IN
     assert page.main(["--diagnosis-results", str(tmp_path / "nothing"), "-o", str(out)]) == 2

@@ -9,7 +9,10 @@ outcome is scored against its label after every diagnosis has returned:
 * a single effect is right when it is accepted first, or named in the ambiguity set of the accepted effect;
 * a pair is right when the accepted set is the truth;
 * every accepted deterministic effect is checked against the acceptance floor on its held-out shrink
-  (:data:`~fmvmg_sim.diagnosis.criteria.SHRINK_FLOOR`).
+  (:data:`~fmvmg_sim.diagnosis.criteria.SHRINK_FLOOR`);
+* every true effect's size is divided by the detection limit the report states for it on that record (the smallest
+  size attributed with probability 0.9 once the scenario's stated uncertainty is calibrated; :data:`LIMIT_PARAMS`
+  translates the labels' parameters): below 1, the record, read through that scenario, can hide the effect.
 
 :func:`format_table` gives the one table docs/diagnosis_guide.md shows.
 """
@@ -22,6 +25,7 @@ import warnings
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from ..diagnosis.criteria import SHRINK_FLOOR
@@ -32,6 +36,25 @@ from ..record import atomic_write_text
 
 #: Noise-level effects (their report row has no held-out shrink of the deterministic gap).
 NOISE_LEVEL = ("quantization", "flicker_noise")
+
+#: A labelled effect's size in the parameter of the report's detection limit: ``{effect: (label parameter, limit
+#: parameter, factor)}``, limit-parameter value = factor x label value. A factor of ``None`` is the scenario's
+#: rate-output offset per fF of feedthrough capacitance (:func:`feedthrough_dps_per_fF`), which turns a label's
+#: feedthrough magnitude in deg/s at 25 C into the capacitance the limit is stated in. Noise-level effects have
+#: no such limit (they are judged by their Allan band and the output lattice).
+LIMIT_PARAMS = {
+    "thermal_lag": ("tau_s", "tau_s", 1.0),
+    "thermal_hysteresis": ("quad_rel_amplitude", "quad_rel", 1.0),
+    "temperature_rate": ("g_dps_per_K_per_s", "g_dph_per_K_per_min", 60.0),   # 1 deg/s per K/s = 60 deg/h per K/min
+    "demod_phase_drift": ("kappa_rad_per_K", "kappa_urad_per_K", 1e6),
+    "quadrature_drift": ("beta_per_K", "beta_per_K", 1.0),
+    "q_factor_drift": ("gamma_per_K", "q_tc_per_K", 1.0),
+    "mode_split_drift": ("split_Hz_per_K", "split_Hz_per_K", 1.0),
+    "feedthrough": ("magnitude_dps", "c_ft_fF", None),
+    "duffing": ("k3_rel", "k3_rel", 1.0),
+    "reference_drift": ("vref_ppm_per_K", "vref_tc_per_K", 1e-6),
+    "stress_relaxation": ("quad_rel", "quad_rel", 1.0),
+}
 
 
 def load_labels(folder: Path) -> dict:
@@ -87,7 +110,57 @@ def kind(label: dict) -> str:
     return {0: "null", 1: "single"}.get(len(label["effects"]), "pair")
 
 
-def score_case(label: dict, report: dict) -> dict:
+def feedthrough_dps_per_fF(scenario) -> float:
+    """The scenario's zero-rate output per fF of drive-to-sense feedthrough capacitance, at 25 C, noise off.
+
+    Parameters
+    ----------
+    scenario : str or path-like
+        A nominal scenario (name or file).
+
+    Returns
+    -------
+    float
+        deg/s per fF (the settled output with 1 fF minus the one without).
+    """
+    from ..api import simulate
+    base = ["scenario.duration_s=0.5", "temperature.start_C=25", "effects.feedthrough.tc_per_K=0"] \
+        + [f"noise.{n}=false" for n in ("brownian", "electronic", "flicker", "quantization", "rate_random_walk")]
+    out = [float(np.mean(simulate(str(scenario), overrides=base + [f"effects.feedthrough.c_ft_fF={c}"])["rate_dps"][-3:]))
+           for c in (0.0, 1.0)]
+    return out[1] - out[0]
+
+
+def limit_ratios(label: dict, report: dict, dps_per_fF: float | None = None) -> dict:
+    """Each true effect's size over the detection limit the report states for it on the record.
+
+    Parameters
+    ----------
+    label : dict
+        ``effects`` ``{name: params}`` in the labels' parameters (:data:`LIMIT_PARAMS`).
+    report : dict
+        The JSON report (its ``detection_limits``).
+    dps_per_fF : float, optional
+        :func:`feedthrough_dps_per_fF` of the scenario (without it a feedthrough's ratio is not known).
+
+    Returns
+    -------
+    dict
+        ``{effect: |size| / limit}``, ``None`` where the label or the report lacks what the ratio needs.
+    """
+    limits = (report.get("detection_limits") or {}).get("effects") or {}
+    out = {}
+    for name, params in label["effects"].items():
+        spec, lim = LIMIT_PARAMS.get(name), limits.get(name) or {}
+        factor = (spec[2] if spec[2] is not None else (1.0 / dps_per_fF if dps_per_fF else None)) if spec else None
+        value = (params or {}).get(spec[0]) if spec else None
+        limit = (lim.get("params") or {}).get(spec[1]) if spec else None
+        ok = factor is not None and isinstance(value, (int, float)) and isinstance(limit, (int, float)) and limit > 0
+        out[name] = abs(value * factor) / limit if ok else None
+    return out
+
+
+def score_case(label: dict, report: dict, dps_per_fF: float | None = None) -> dict:
     """One record's outcome against its label.
 
     Parameters
@@ -96,19 +169,21 @@ def score_case(label: dict, report: dict) -> dict:
         ``effects`` and, optionally, ``strength``.
     report : dict
         The JSON report, or ``{"error": ...}``.
+    dps_per_fF : float, optional
+        The scenario's :func:`feedthrough_dps_per_fF`, for a feedthrough's :func:`limit_ratios`.
 
     Returns
     -------
     dict
         ``truth``, ``strength``, ``kind``, ``verdict``, ``accepted``, ``ambiguous_with``, ``shrink`` (of each
         accepted deterministic effect), ``right``, ``below_floor`` (accepted effects whose shrink is below the
-        floor), ``rules_fired``, ``error``.
+        floor), ``limit_ratio`` (:func:`limit_ratios`), ``rules_fired``, ``error``.
     """
     truth = sorted(label["effects"])
     row = {"truth": truth, "strength": dict(label.get("strength") or {}), "kind": kind(label)}
     if "error" in report:
         return dict(row, verdict=None, accepted=[], ambiguous_with={}, shrink={}, right=False, below_floor=[],
-                    rules_fired=[], error=report["error"])
+                    limit_ratio={t: None for t in truth}, rules_fired=[], error=report["error"])
     acc = list(report["accepted"])
     amb = report.get("ambiguous_with") or {}
     rows = {r["effect"]: r for r in report.get("ranked", [])}
@@ -122,7 +197,8 @@ def score_case(label: dict, report: dict) -> dict:
         right = sorted(acc) == truth
     below = [a for a, s in shrink.items() if s is None or s < SHRINK_FLOOR]
     return dict(row, verdict=report["verdict"], accepted=acc, ambiguous_with=amb, shrink=shrink, right=bool(right),
-                below_floor=below, rules_fired=[r["rule"] for r in report.get("rules_fired", [])], error=None)
+                below_floor=below, limit_ratio=limit_ratios(label, report, dps_per_fF),
+                rules_fired=[r["rule"] for r in report.get("rules_fired", [])], error=None)
 
 
 def summary(rows: dict) -> dict:
@@ -137,15 +213,19 @@ def summary(rows: dict) -> dict:
     -------
     dict
         ``{group: {"right": k, "cases": n}}`` for ``null``, ``single_clear`` (single effects labelled clear),
-        ``single`` and ``pair``; ``accepted_below_floor`` (accepted effects whose held-out shrink is below the
+        ``single_clear_above_limit`` (those whose size is at least the report's detection limit), ``single`` and
+        ``pair``; ``accepted_below_floor`` (accepted effects whose held-out shrink is below the
         floor, over all records) and ``errors``.
     """
     def part(sel):
         v = [r for r in rows.values() if sel(r)]
         return {"right": sum(r["right"] for r in v), "cases": len(v)}
+    def clear(r):
+        return r["kind"] == "single" and bool(r["strength"]) and all(s == "clear" for s in r["strength"].values())
     return {"null": part(lambda r: r["kind"] == "null"),
-            "single_clear": part(lambda r: r["kind"] == "single"
-                                 and all(s == "clear" for s in r["strength"].values()) and r["strength"]),
+            "single_clear": part(clear),
+            "single_clear_above_limit": part(lambda r: clear(r) and all(
+                x is not None and x >= 1.0 for x in r.get("limit_ratio", {}).values())),
             "single": part(lambda r: r["kind"] == "single"),
             "pair": part(lambda r: r["kind"] == "pair"),
             "accepted_below_floor": sum(len(r["below_floor"]) for r in rows.values()),
@@ -201,8 +281,10 @@ def run_independent(folder: Path, scenarios: list, out: Path, cases: list | None
                             desc="independent records"))
     result = {"folder": str(folder), "shrink_floor": SHRINK_FLOOR, "scenarios": {}}
     it = iter(reports)
+    with_ft = any("feedthrough" in lab["effects"] for lab in labels.values())
     for s in scenarios:
-        rows = {c: score_case(labels[c], next(it)) for c in labels}
+        ft = feedthrough_dps_per_fF(s) if with_ft else None
+        rows = {c: score_case(labels[c], next(it), ft) for c in labels}
         result["scenarios"][Path(str(s)).stem] = {"rows": rows, "summary": summary(rows)}
     atomic_write_text(Path(out) / "scores.json", json.dumps(result, indent=1, default=float) + "\n")
     atomic_write_text(Path(out) / "table.md", format_table(result))
@@ -231,9 +313,27 @@ def accepted_cell(row: dict) -> str:
     return "; ".join(parts) or "-"
 
 
+def ratio_cell(row: dict) -> str:
+    """A table cell of a scored row: each true effect's size over the report's detection limit (:func:`limit_ratios`).
+
+    Parameters
+    ----------
+    row : dict
+        From :func:`score_case`.
+
+    Returns
+    -------
+    str
+    """
+    r = row.get("limit_ratio") or {}
+    return ", ".join("n/a" if t in NOISE_LEVEL else "?" if r.get(t) is None else f"{r[t]:.2g}"
+                     for t in row["truth"]) or "-"
+
+
 def format_table(result: dict, numbered: bool = False) -> str:
     """The Markdown table of a run: one row per record, per scenario its verdict, accepted effects (held-out
-    shrink, look-alikes) and whether it is right, then the rates.
+    shrink, look-alikes), each true effect's size over its detection limit and whether it is right, then the
+    rates.
 
     Parameters
     ----------
@@ -248,22 +348,24 @@ def format_table(result: dict, numbered: bool = False) -> str:
     """
     names = list(result["scenarios"])
     cases = list(next(iter(result["scenarios"].values()))["rows"]) if names else []
-    head = "| record | truth (strength) | " + " | ".join(f"{n}: verdict | accepted (shrink) ~ look-alikes | right"
-                                                          for n in names) + " |"
-    L = [head, "|" + "---|" * (2 + 3 * len(names))]
+    head = "| record | truth (strength) | " + " | ".join(
+        f"{n}: verdict | accepted (shrink) ~ look-alikes | size / limit | right" for n in names) + " |"
+    L = [head, "|" + "---|" * (2 + 4 * len(names))]
     for i, c in enumerate(cases, 1):
         r0 = result["scenarios"][names[0]]["rows"][c]
         truth = ", ".join(f"{t} ({r0['strength'].get(t, '?')})" for t in r0["truth"]) or "none (null unit)"
         cells = []
         for n in names:
             r = result["scenarios"][n]["rows"][c]
-            cells += [r["verdict"] or "-", accepted_cell(r), "yes" if r["right"] else "**no**"]
+            cells += [r["verdict"] or "-", accepted_cell(r), ratio_cell(r), "yes" if r["right"] else "**no**"]
         L.append(f"| {i if numbered else c} | {truth} | " + " | ".join(cells) + " |")
-    L += ["", "| scenario | null units 'none' | clear single effect found | all single effects found | pairs exact "
-          f"| accepted with shrink below {result['shrink_floor']:g} | errors |", "|---|---|---|---|---|---|---|"]
+    L += ["", "| scenario | null units 'none' | clear single effect found | of which at or above its limit "
+          f"| all single effects found | pairs exact | accepted with shrink below {result['shrink_floor']:g} | errors |",
+          "|---|---|---|---|---|---|---|---|"]
     for n in names:
         s = result["scenarios"][n]["summary"]
         f = lambda d: f"{d['right']} / {d['cases']}"  # noqa: E731
-        L.append(f"| {n} | {f(s['null'])} | {f(s['single_clear'])} | {f(s['single'])} | {f(s['pair'])} | "
+        above = f(s["single_clear_above_limit"]) if "single_clear_above_limit" in s else "-"
+        L.append(f"| {n} | {f(s['null'])} | {f(s['single_clear'])} | {above} | {f(s['single'])} | {f(s['pair'])} | "
                  f"{s['accepted_below_floor']} | {s['errors']} |")
     return "\n".join(L) + "\n"
