@@ -118,6 +118,7 @@ def test_case_mix_checks_its_choices():
     m = CaseMix.build(["reference_drift", "q_factor_drift", "reference_drift"], "single", 10.0, 1000.0)
     assert m.effects == ("q_factor_drift", "reference_drift") and (m.p_null, m.p_single) == (0.0, 1.0)
     assert CaseMix.build(["duffing", "feedthrough"], "pair").p_single == 0.0
+    assert (CaseMix.build(kind="null").p_null, CaseMix.build(["duffing"], "null").p_single) == (1.0, 0.0)
     for args, field in [((["q_drift"],), "effects"), (([],), "effects"), ((None, "triple"), "kind"), ((["duffing"], "default"), "effects"),
                         ((None, "single", 0.0, 10.0), "snr"), ((None, "single", 10.0, 10.0), "snr"),
                         ((None, "single", 1.0, float("inf")), "snr")]:
@@ -133,6 +134,8 @@ def test_a_narrow_mix_draws_single_effects_from_its_pool(tmp_path):
         lab = make_case(k, 60221, tmp_path, str(NOMINAL), duration_s=1.1 * 3600.0, mix=mix)
         assert len(lab["effects"]) == 1 and set(lab["effects"]) <= set(mix.effects)
         assert 10.0 <= lab["snr_target"] <= 1000.0
+    assert not make_case(0, 60221, tmp_path / "n", str(NOMINAL), duration_s=1.1 * 3600.0,
+                         mix=CaseMix.build(kind="null"))["effects"]
     # the default mix draws the same case as before the mix existed (no mix given)
     a = make_case(5, 4242, tmp_path / "a", str(NOMINAL), duration_s=1.1 * 3600.0)
     b = make_case(5, 4242, tmp_path / "b", str(NOMINAL), duration_s=1.1 * 3600.0, mix=CaseMix())

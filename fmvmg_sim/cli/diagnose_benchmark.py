@@ -27,9 +27,9 @@ def register(sub) -> None:
     p.add_argument("--workers", type=int, default=2, help="LocalCluster workers (default 2)")
     p.add_argument("--effects", default=None, metavar="NAME[,NAME...]",
                    help="draw effects only from these (default: the whole library)")
-    p.add_argument("--mix", default="default", choices=("default", "single", "pair"),
+    p.add_argument("--mix", default="default", choices=("default", "single", "pair", "null"),
                    help="default: ~20 %% null, ~55 %% one effect, ~25 %% two; single: one effect each; "
-                        "pair: two effects each")
+                        "pair: two effects each; null: no effect (the false-alarm rate alone)")
     p.add_argument("--snr-min", type=float, default=1.0, help="least signature SNR target (default 1)")
     p.add_argument("--snr-max", type=float, default=1000.0, help="largest signature SNR target (default 1000)")
     p.add_argument("--ool-fraction", type=float, default=0.0, metavar="F",

@@ -105,7 +105,8 @@ class CaseMix:
     p_ool: float = 0.0
 
     #: ``--mix`` names: (p_null, p_single).
-    KINDS: ClassVar[dict] = {"default": (P_NULL, P_SINGLE), "single": (0.0, 1.0), "pair": (0.0, 0.0)}
+    KINDS: ClassVar[dict] = {"default": (P_NULL, P_SINGLE), "single": (0.0, 1.0), "pair": (0.0, 0.0),
+                             "null": (1.0, 0.0)}
 
     @classmethod
     def build(cls, effects: list | None = None, kind: str = "default", snr_min: float = SNR_TARGET[0],
@@ -116,7 +117,7 @@ class CaseMix:
         ----------
         effects : list of str, optional
             Effect names (default None: the whole library; an empty list is an error).
-        kind : {"default", "single", "pair"}, optional
+        kind : {"default", "single", "pair", "null"}, optional
         snr_min, snr_max : float, optional
         ool_fraction : float, optional
             Fraction of out-of-library cases, in [0, 1).
