@@ -126,9 +126,9 @@ def feedthrough_dps_per_fF(scenario) -> float:
     from ..api import simulate
     base = ["scenario.duration_s=0.5", "temperature.start_C=25", "effects.feedthrough.tc_per_K=0"] \
         + [f"noise.{n}=false" for n in ("brownian", "electronic", "flicker", "quantization", "rate_random_walk")]
-    out = [float(np.mean(simulate(str(scenario), overrides=base + [f"effects.feedthrough.c_ft_fF={c}"])["rate_dps"][-3:]))
-           for c in (0.0, 1.0)]
-    return out[1] - out[0]
+    settled = [float(np.mean(simulate(str(scenario), overrides=base + [f"effects.feedthrough.c_ft_fF={c}"])
+                             ["rate_dps"][-3:])) for c in (0.0, 1.0)]
+    return settled[1] - settled[0]
 
 
 def limit_ratios(label: dict, report: dict, dps_per_fF: float | None = None) -> dict:
@@ -151,12 +151,16 @@ def limit_ratios(label: dict, report: dict, dps_per_fF: float | None = None) -> 
     limits = (report.get("detection_limits") or {}).get("effects") or {}
     out = {}
     for name, params in label["effects"].items():
-        spec, lim = LIMIT_PARAMS.get(name), limits.get(name) or {}
-        factor = (spec[2] if spec[2] is not None else (1.0 / dps_per_fF if dps_per_fF else None)) if spec else None
-        value = (params or {}).get(spec[0]) if spec else None
-        limit = (lim.get("params") or {}).get(spec[1]) if spec else None
-        ok = factor is not None and isinstance(value, (int, float)) and isinstance(limit, (int, float)) and limit > 0
-        out[name] = abs(value * factor) / limit if ok else None
+        out[name] = None
+        if name not in LIMIT_PARAMS:
+            continue
+        label_param, limit_param, factor = LIMIT_PARAMS[name]
+        if factor is None:
+            factor = 1.0 / dps_per_fF if dps_per_fF else None
+        value = (params or {}).get(label_param)
+        limit = ((limits.get(name) or {}).get("params") or {}).get(limit_param)
+        if factor is not None and isinstance(value, (int, float)) and isinstance(limit, (int, float)) and limit > 0:
+            out[name] = abs(value * factor) / limit
     return out
 
 
@@ -220,6 +224,7 @@ def summary(rows: dict) -> dict:
     def part(sel):
         v = [r for r in rows.values() if sel(r)]
         return {"right": sum(r["right"] for r in v), "cases": len(v)}
+
     def clear(r):
         return r["kind"] == "single" and bool(r["strength"]) and all(s == "clear" for s in r["strength"].values())
     return {"null": part(lambda r: r["kind"] == "null"),
@@ -360,8 +365,8 @@ def format_table(result: dict, numbered: bool = False) -> str:
             cells += [r["verdict"] or "-", accepted_cell(r), ratio_cell(r), "yes" if r["right"] else "**no**"]
         L.append(f"| {i if numbered else c} | {truth} | " + " | ".join(cells) + " |")
     L += ["", "| scenario | null units 'none' | clear single effect found | of which at or above its limit "
-          f"| all single effects found | pairs exact | accepted with shrink below {result['shrink_floor']:g} | errors |",
-          "|---|---|---|---|---|---|---|---|"]
+          "| all single effects found | pairs exact "
+          f"| accepted with shrink below {result['shrink_floor']:g} | errors |", "|---|---|---|---|---|---|---|---|"]
     for n in names:
         s = result["scenarios"][n]["summary"]
         f = lambda d: f"{d['right']} / {d['cases']}"  # noqa: E731
