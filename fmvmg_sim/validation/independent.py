@@ -364,7 +364,7 @@ def format_table(result: dict, numbered: bool = False) -> str:
             r = result["scenarios"][n]["rows"][c]
             cells += [r["verdict"] or "-", accepted_cell(r), ratio_cell(r), "yes" if r["right"] else "**no**"]
         L.append(f"| {i if numbered else c} | {truth} | " + " | ".join(cells) + " |")
-    L += ["", "| scenario | null units 'none' | clear single effect found | of which at or above its limit "
+    L += ["", "| scenario | null units 'none' | clear single effect found | found when at or above its limit "
           "| all single effects found | pairs exact "
           f"| accepted with shrink below {result['shrink_floor']:g} | errors |", "|---|---|---|---|---|---|---|---|"]
     for n in names:
