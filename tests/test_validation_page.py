@@ -71,13 +71,21 @@ def test_the_benchmark_scores_join_the_diagnosis_section(tmp_path):
         "cases": 20, "seed": 11, "null_runs": 6, "errors": 0, "false_alarm_rate": 0.5, "null_cases": 2, "top1": 0.7, "top2": 0.8,
         "single_above": 10, "pairs_exact": 1 / 3, "pair_cases": 3, "median_shrink": 0.99,
         "ci95": {"top1": [0.397, 0.892]}}))
+    nulls = tmp_path / "nulls"
+    nulls.mkdir()
+    (nulls / "scores.json").write_text(json.dumps({
+        "cases": 12, "seed": 12, "null_runs": 6, "errors": 0, "false_alarm_rate": 1 / 12, "null_cases": 12,
+        "top1": None, "top2": None, "single_above": 0, "pairs_exact": None, "pair_cases": 0, "median_shrink": None,
+        "mix": {"p_null": 1.0, "p_single": 0.0}}))
     out = tmp_path / "v.md"
     assert page.main(["--only", "diagnosis", "--diagnosis-results", str(tmp_path), "--benchmark-results", str(bench),
-                      "-o", str(out)]) == 0
+                      "--benchmark-results", str(nulls), "-o", str(out)]) == 0
     md = out.read_text()
     assert "20 cases of seed 11, 6 null re-simulations per diagnosis, 0 errors" in md
     assert "| top-1, single effects above the limit | 0.700 | 7 of 10 | 0.397-0.892 |" in md
     assert "| false alarms (null cases) | 0.500 | 1 of 2 |" in md
+    # a second run, of null units only, adds its own table after the first
+    assert md.index("--seed S --mix null") > md.index("1 of 2") and "| false alarms (null cases) | 0.083 | 1 of 12 |" in md
     assert page.main(["--only", "diagnosis", "--benchmark-results", str(bench), "-o", str(out)]) == 2
 
 

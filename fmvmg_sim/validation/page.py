@@ -10,8 +10,8 @@ some sections and writes them to another file (a partial page is never mistaken 
 ``--quick`` shortens every measurement to check the machinery (its figures are not the page's).
 
 The diagnosis section (minutes per record) is left out of a default run: ``--diagnosis-results DIR`` adds it,
-tabulating a finished ``fmvmg diagnose-independent`` output folder (``--benchmark-results DIR`` adds the scores of a
-finished ``fmvmg diagnose-benchmark`` folder to it), and ``--only diagnosis`` diagnoses the labelled records that
+tabulating a finished ``fmvmg diagnose-independent`` output folder (``--benchmark-results DIR``, repeatable, adds the
+scores of a finished ``fmvmg diagnose-benchmark`` folder to it), and ``--only diagnosis`` diagnoses the labelled records that
 ship in ``tests/data/independent``.
 """
 
@@ -318,15 +318,20 @@ def benchmark_lines(folder: str) -> list[str]:
     """
     sc = json.loads((Path(folder) / "scores.json").read_text())
     errors = int(sc.get("errors", 0))
-    return ["On the project's own cases (`fmvmg diagnose-benchmark --cases N --seed S -o out/bench`, units drawn across "
-            "the nominal model's stated uncertainty, an effect mix withheld; `--benchmark-results out/bench` adds this "
-            f"table): {sc['cases']} cases of seed {sc.get('seed', '-')}, {sc.get('null_runs', '-')} null "
+    mix = sc.get("mix") or {}
+    drawn = {(1.0, 0.0): ("no effect in any (`--mix null`: the false-alarm rate alone)", " --mix null"),
+             (0.0, 1.0): ("one effect each (`--mix single`)", " --mix single"),
+             (0.0, 0.0): ("two effects each (`--mix pair`)", " --mix pair")}.get(
+        (mix.get("p_null"), mix.get("p_single")), ("an effect mix withheld", ""))
+    return [f"On the project's own cases (`fmvmg diagnose-benchmark --cases N --seed S{drawn[1]} -o out/bench`, units "
+            f"drawn across the nominal model's stated uncertainty, {drawn[0]}; `--benchmark-results out/bench` adds "
+            f"this table): {sc['cases']} cases of seed {sc.get('seed', '-')}, {sc.get('null_runs', '-')} null "
             f"re-simulations per diagnosis, {errors} error{'' if errors == 1 else 's'}; Wilson 95 % intervals.", ""] \
         + targets_table(sc)
 
 
 def diagnosis_records(quick: bool = False, log=print, results: str | None = None,
-                      benchmark: str | None = None) -> Section:
+                      benchmark: str | list | None = None) -> Section:
     """The diagnosis on labelled records of an independent generator, with each scenario of
     :data:`DIAGNOSIS_SCENARIOS` (:mod:`.independent`).
 
@@ -338,8 +343,8 @@ def diagnosis_records(quick: bool = False, log=print, results: str | None = None
     results : str, optional
         A finished ``fmvmg diagnose-independent`` output folder (its ``scores.json``) to tabulate instead of
         diagnosing the shipped records again.
-    benchmark : str, optional
-        A finished ``fmvmg diagnose-benchmark`` output folder whose scores are added (:func:`benchmark_lines`).
+    benchmark : str or list of str, optional
+        Finished ``fmvmg diagnose-benchmark`` output folders whose scores are added (:func:`benchmark_lines`).
 
     Returns
     -------
@@ -366,8 +371,8 @@ def diagnosis_records(quick: bool = False, log=print, results: str | None = None
              "`--diagnosis-results` the section diagnoses the records that ship in `tests/data/independent`. "
              f"Records: {n_rec} (folder `{Path(res['folder']).name}`).", ""]
     lines += I.format_table(res, numbered=True).rstrip("\n").split("\n")
-    if benchmark is not None:
-        lines += [""] + benchmark_lines(benchmark)
+    for folder in [benchmark] if isinstance(benchmark, str) else benchmark or []:
+        lines += [""] + benchmark_lines(folder)
     data = {n: res["scenarios"][n]["summary"] for n in names}
     return Section("Diagnosis on records made elsewhere", lines, data)
 
@@ -442,14 +447,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--diagnosis-results", default=None, metavar="DIR",
                     help="add the diagnosis section (left out by default: minutes per record), tabulating a finished "
                          "`fmvmg diagnose-independent` output folder")
-    ap.add_argument("--benchmark-results", default=None, metavar="DIR",
+    ap.add_argument("--benchmark-results", action="append", default=[], metavar="DIR",
                     help="with --diagnosis-results: add the scores of a finished `fmvmg diagnose-benchmark` output "
-                         "folder to the diagnosis section")
+                         "folder to the diagnosis section (repeat for several runs, e.g. the default mix and "
+                         "--mix null)")
     a = ap.parse_args(argv)
     keys = None
     options = {}
-    for opt, folder, key, cmd in (("--diagnosis-results", a.diagnosis_results, "scenarios", "diagnose-independent"),
-                                  ("--benchmark-results", a.benchmark_results, "cases", "diagnose-benchmark")):
+    checks = [("--diagnosis-results", a.diagnosis_results, "scenarios", "diagnose-independent")] \
+        + [("--benchmark-results", b, "cases", "diagnose-benchmark") for b in a.benchmark_results]
+    for opt, folder, key, cmd in checks:
         if not folder:
             continue
         f = Path(folder) / "scores.json"
@@ -469,7 +476,7 @@ def main(argv: list[str] | None = None) -> int:
         print("--benchmark-results: needs --diagnosis-results (the section it is added to)", file=sys.stderr)
         return 2
     if a.diagnosis_results:
-        options["diagnosis"] = {"results": a.diagnosis_results, "benchmark": a.benchmark_results}
+        options["diagnosis"] = {"results": a.diagnosis_results, "benchmark": a.benchmark_results or None}
     if a.only:
         keys = [k.strip() for k in a.only.split(",")]
         bad = [k for k in keys if k not in dict(SECTIONS)]
