@@ -7,9 +7,9 @@ import pytest
 from fmvmg_sim.diagnosis.criteria import CRITERIA, CRITERIA_BY_NAME, SHRINK_FLOOR, failed_criteria
 from fmvmg_sim.diagnosis.evaluation import Evaluation
 from fmvmg_sim.diagnosis.heldout import FoldScore, HeldOutGain, together
-from fmvmg_sim.diagnosis.rules import (RULES, Ambiguity, Attribution, BestSingle, LocatedGapNamed, PairClosesGap,
-                                       PairFromScratch, SecondBesideFirst, SecondRejudged, best_of, decide,
-                                       lookalikes, verdict)
+from fmvmg_sim.diagnosis.rules import (RULES, Ambiguity, Attribution, BestSingle, GapRequired, LocatedGapNamed,
+                                       PairClosesGap, PairFromScratch, SecondBesideFirst, SecondRejudged, best_of,
+                                       decide, lookalikes, verdict)
 
 
 def ev(names, gain=1.0, ci=None, folds_ok=True, dbic=-50.0, bound=None, z=10.0, shrink=0.8, new=None, fitted=True):
@@ -187,9 +187,24 @@ def test_the_ambiguity_set_is_every_effect_whose_gain_reaches_the_accepted_ones_
     assert att.ambiguous == {b: [c], a: [d]}
 
 
+def test_an_effect_is_attributed_only_where_the_localisation_locates_a_gap():
+    single = {"temperature_rate": ev("temperature_rate", gain=0.05, ci=[0.03, 0.07])}
+    att = decide(Attribution(dict(single), located_gap=False), Fake())
+    assert att.selected == [] and att.final is None and "gap_required" in [r["rule"] for r in att.fired]
+    assert "null band" in att.notes["temperature_rate"]
+    assert verdict(att.selected, att.ambiguous, False, False).verdict == "none"
+    # a pair selected without a located gap goes as well; with one, the rule does nothing
+    pair = Attribution(dict(single), selected=["thermal_lag", "temperature_rate"], final=ev(("thermal_lag",
+                                                                                          "temperature_rate")))
+    GapRequired("gap_required").apply(pair, Fake())
+    assert pair.selected == [] and set(pair.notes) == {"thermal_lag", "temperature_rate"}
+    kept = decide(Attribution(dict(single), located_gap=True), Fake())
+    assert kept.selected == ["temperature_rate"] and "gap_required" not in [r["rule"] for r in kept.fired]
+
+
 def test_the_rules_run_in_order_and_say_which_fired():
     single = {"feedthrough": ev("feedthrough", gain=2.0), "duffing": ev("duffing", gain=0.1, shrink=0.01)}
-    att = decide(Attribution(single), Fake())
+    att = decide(Attribution(single, located_gap=True), Fake())
     assert att.selected == ["feedthrough"] and [r["rule"] for r in att.fired] == ["best_single"]
     assert [r.name for r in RULES][:2] == ["best_single", "second_beside_first"]
 

@@ -307,6 +307,27 @@ class SecondRejudged(Rule):
         att.fire(self, f"{dropped} dropped: scored with the record's own rate noise it fails ({'; '.join(ev.reasons)})")
 
 
+class GapRequired(Rule):
+    """No located gap, no attribution: when every statistic of the localisation lies inside the null band, the
+    effects selected so far are dropped and the answer is none. Each library effect's own tests (held-out interval,
+    folds, BIC, significance, shrink) keep its chance of passing on a unit without any effect small, but every
+    deterministic effect of the library is tried on every record, and one of a dozen passes by chance far more
+    often than any one does. The localisation's band is drawn from the null re-simulations and Holm-corrected over
+    the statistics it reads, so asking for a located gap before an attribution holds the false alarms of the whole
+    diagnosis near the band's level. An effect that passes without moving any statistic beyond the band stays in
+    the attribution table with the reason. Noise-level effects (judged by the Allan band and the output lattice)
+    are not selected here and are not dropped."""
+
+    def apply(self, att: Attribution, cands: Candidates) -> None:  # noqa: D102
+        if att.located_gap or not att.selected:
+            return
+        dropped, att.selected, att.final = att.selected, [], None
+        for n in dropped:
+            att.notes[n] = "passes its own tests, but no statistic of the localisation lies beyond the null band"
+        att.fire(self, f"{' + '.join(dropped)} dropped: no statistic lies beyond the null band, and a chance pass "
+                       "among the library's candidates is as likely")
+
+
 class Ambiguity(Rule):
     """The ambiguity set of each selected effect: the other effects that explain the same gap as well (their
     held-out gain inside its interval, admissible parameters, their own interval above zero; :func:`lookalikes`),
@@ -352,6 +373,7 @@ RULES: tuple[Rule, ...] = (
     LocatedGapNamed("located_gap_named"),
     PairClosesGap("pair_closes_gap"),
     SecondRejudged("second_rejudged"),
+    GapRequired("gap_required"),
     Ambiguity("ambiguity"),
 )
 
