@@ -20,8 +20,9 @@ def register(sub) -> None:
                    "e.g. scenarios/nominal_a.toml")
     add_output(p, None, "output folder (default: out/diagnose_<record name>)")
     add_json(p, "the report")
-    p.add_argument("--null-runs", type=int, default=None, help="null re-simulations (default 6; with fewer than 4 only a very large gap "
-                        "is located, and nothing is attributed without one)")
+    p.add_argument("--null-runs", type=int, default=None,
+                   help="null re-simulations (default 6; with fewer than 4 only a very large gap is located, and "
+                        "nothing is attributed without one)")
     p.add_argument("--seed", type=int, default=0, help="seed of the null re-simulations")
     add_no_plots(p)
     add_no_progress(p)
