@@ -162,12 +162,14 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
     A unit's quadrature coupling has either sign, and the record's quadrature output either polarity (which way
     its reference is wired): the two combinations that give the quadrature output the record's sign
     (:func:`quadrature_conventions`) turn the demodulated outputs the opposite ways with the phase error, so that
-    the bias the quadrature leaks has the one sign or the other. Each is calibrated, and the one that fits the
-    training window better is kept. The one kept is calibrated again from the Q law's other form
-    (:func:`.calibrate.law_starts`), then from the Q law and effort channel that fit the AGC effort alone
-    (:func:`.effort_law.effort_law_start`); a calibration from another start replaces it when it fits the training
-    window better by more than the calibration's resolution (:func:`.calibrate.resolution`: where an unmodelled
-    effect dominates the misfit, a start's small gain is the effect's trade with the laws, not the unit).
+    the bias the quadrature leaks has the one sign or the other. Each is calibrated from the data-sheet point, then
+    again from the Q law's other form (:func:`.calibrate.law_starts`) and from the Q law and effort channel that
+    fit the AGC effort alone (:func:`.effort_law.effort_law_start`); a calibration from another start replaces the
+    first when it fits the training window better by more than the calibration's resolution
+    (:func:`.calibrate.resolution`: where an unmodelled effect dominates the misfit, a start's small gain is the
+    effect's trade with the laws, not the unit). Of the two conventions, the one that then fits the training window
+    better is kept: compared from the data-sheet point alone, the wrong one can fit better with its knobs at their
+    bounds while the right one has not yet left a law's wrong form.
 
     Parameters
     ----------
@@ -183,12 +185,13 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
     """
     best = None
     for dev, polarity in quadrature_conventions(prep, device):
-        f = Fitter(prep, dev, quadrature_polarity=polarity)
-        cal = calibrate(f, train)
+        def new_fitter(dev=dev, polarity=polarity):
+            return Fitter(prep, dev, quadrature_polarity=polarity)
+        f = new_fitter()
+        f, cal = recalibrated(f, calibrate(f, train), train, new_fitter)
         if best is None or cal.objective < best[1].objective:
             best = (f, cal)
-    f0 = best[0]
-    f, cal = recalibrated(*best, train, lambda: Fitter(prep, f0.device0, quadrature_polarity=f0.quadrature_polarity))
+    f, cal = best
     f.delay_s = cal.theta.get("temperature_delay_s", 0.0)
     return f, cal
 
