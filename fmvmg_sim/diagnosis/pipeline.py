@@ -29,7 +29,7 @@ from ..record import Record, read_record
 from ..scenario import load_scenario
 from . import localize as loc
 from .attribution import CandidateFitter, attribute
-from .calibrate import calibrate, recalibrated, release_gains
+from .calibrate import calibrate, recalibrated, release_gains, resolution
 from .data import Prepared, difference_sigma, prepare
 from .detection import detection_limits
 from .fitting import DEVICE_EFFECTS, Fitter
@@ -167,9 +167,11 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
     fit the AGC effort alone (:func:`.effort_law.effort_law_start`); a calibration from another start replaces the
     first when it fits the training window better by more than the calibration's resolution
     (:func:`.calibrate.resolution`: where an unmodelled effect dominates the misfit, a start's small gain is the
-    effect's trade with the laws, not the unit). Of the two conventions, the one that then fits the training window
-    better is kept: compared from the data-sheet point alone, the wrong one can fit better with its knobs at their
-    bounds while the right one has not yet left a law's wrong form.
+    effect's trade with the laws, not the unit). The convention that fits better from the data-sheet point is kept
+    unless the other, from all its starts, fits better by more than that resolution: from the data-sheet point
+    alone the wrong one can fit better with its knobs at their bounds while the right one has not yet left a law's
+    wrong form, and where an unmodelled effect dominates the misfit the two trade with it by less than the
+    resolution.
 
     Parameters
     ----------
@@ -183,15 +185,18 @@ def calibrated(prep: Prepared, device, train: np.ndarray) -> tuple:
     fitter : Fitter
     cal : Calibration
     """
-    best = None
+    runs = []
     for dev, polarity in quadrature_conventions(prep, device):
         def new_fitter(dev=dev, polarity=polarity):
             return Fitter(prep, dev, quadrature_polarity=polarity)
         f = new_fitter()
-        f, cal = recalibrated(f, calibrate(f, train), train, new_fitter)
-        if best is None or cal.objective < best[1].objective:
-            best = (f, cal)
-    f, cal = best
+        first = calibrate(f, train)
+        runs.append((first.objective, recalibrated(f, first, train, new_fitter)))
+    runs.sort(key=lambda r: r[0])
+    f, cal = runs[0][1]
+    for _, (f_other, cal_other) in runs[1:]:
+        if cal_other.objective < cal.objective - resolution(cal.objective):
+            f, cal = f_other, cal_other
     f.delay_s = cal.theta.get("temperature_delay_s", 0.0)
     return f, cal
 
